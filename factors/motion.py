@@ -1,0 +1,71 @@
+"""Differential-drive motion over one (variable) time step. Paper eq. 2-6.
+
+The paper writes the position update with the midpoint heading,
+
+    x' = x + v dt cos(theta + omega dt / 2)                      (eq. 2)
+    y' = y + v dt sin(theta + omega dt / 2)                      (eq. 3)
+
+which is the first-order form of the exact constant-twist arc. We integrate
+the arc exactly, because the smoother integrates over keyframe intervals much
+longer than an EKF step:
+
+    x' = x + v dt sinc(omega dt / 2) cos(theta + omega dt / 2)
+    y' = y + v dt sinc(omega dt / 2) sin(theta + omega dt / 2)
+    theta' = theta + omega dt                                    (eq. 4)
+    v' = v,  omega' = omega                                      (eq. 5-6)
+
+(Derivation: integrate x' = v cos(theta + omega t) over [0, dt]; the result
+v/omega (sin(theta + a) - sin theta), a = omega dt, equals the line above by the
+sum-to-product identity.) sinc(a/2) -> 1 recovers eq. 2-3; at omega -> 0 the
+series branch of ``sinc`` keeps it exact. Velocities are states with a random
+walk; that part lives in the estimators' process models.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from factors._math import dsinc, sinc
+
+INPUTS = ("x", "y", "theta", "v", "omega")
+
+
+def propagate(x, y, theta, v, omega, dt):
+    """Pose after moving with constant body velocity for ``dt``.
+
+    Args:
+        x, y: (...) position of the robot origin, world frame [m].
+        theta: (...) heading, world frame, CCW from x [rad].
+        v: (...) forward speed of the origin [m/s].
+        omega: (...) yaw rate [rad/s].
+        dt: (...) time step [s]; any sign, any size.
+
+    Returns:
+        pose: (..., 3) [x', y', theta'] (theta' not wrapped, so that the
+            Jacobian stays continuous; callers wrap).
+        J: (..., 3, 5) d pose / d (x, y, theta, v, omega).
+    """
+    x, y, theta, v, omega, dt = np.broadcast_arrays(
+        *(np.asarray(a, dtype=float) for a in (x, y, theta, v, omega, dt))
+    )
+    half = 0.5 * omega * dt
+    s, ds = sinc(half), dsinc(half)
+    phi = theta + half
+    c, sn = np.cos(phi), np.sin(phi)
+    d = v * dt * s  # chord length of the arc [m]
+
+    pose = np.stack([x + d * c, y + d * sn, theta + omega * dt], -1)
+
+    J = np.zeros(x.shape + (3, 5))
+    J[..., 0, 0] = 1.0
+    J[..., 1, 1] = 1.0
+    J[..., 2, 2] = 1.0
+    J[..., 0, 2] = -d * sn
+    J[..., 1, 2] = d * c
+    J[..., 0, 3] = dt * s * c
+    J[..., 1, 3] = dt * s * sn
+    # d/d omega through both the chord length (sinc) and the midpoint heading.
+    k = v * dt * 0.5 * dt
+    J[..., 0, 4] = k * (ds * c - s * sn)
+    J[..., 1, 4] = k * (ds * sn + s * c)
+    J[..., 2, 4] = dt
+    return pose, J

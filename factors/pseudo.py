@@ -1,0 +1,28 @@
+"""The paper's two pseudo-updates (sec. III-D, eq. 35-38).
+
+* zero slip (eq. 35-36): a measurement z = 0 of (slip_left, slip_right), used
+  while calibrating so the scale factors absorb all systematic error;
+* hold the scale factors (eq. 37-38): a measurement z = current value of
+  (scale_left, scale_right, scale_track), used while estimating slip.
+
+Both are identity selections of states; writing them as models keeps the EKF
+and the smoother on the same footing (the smoother turns them into priors).
+"""
+from __future__ import annotations
+
+import numpy as np
+
+ZERO_SLIP_INPUTS = ("slip_left", "slip_right")
+HOLD_SCALE_INPUTS = ("scale_left", "scale_right", "scale_track")
+
+
+def zero_slip(slip_left, slip_right):
+    """h: (..., 2) the slips [m/s]; J: (..., 2, 2) identity."""
+    sl, sr = np.broadcast_arrays(np.asarray(slip_left, dtype=float), np.asarray(slip_right, dtype=float))
+    return np.stack([sl, sr], -1), np.broadcast_to(np.eye(2), sl.shape + (2, 2)).copy()
+
+
+def hold_scale(scale_left, scale_right, scale_track):
+    """h: (..., 3) the scale factors [-]; J: (..., 3, 3) identity."""
+    a = np.broadcast_arrays(*(np.asarray(s, dtype=float) for s in (scale_left, scale_right, scale_track)))
+    return np.stack(a, -1), np.broadcast_to(np.eye(3), a[0].shape + (3, 3)).copy()
