@@ -1,0 +1,254 @@
+"""The velocity-augmented EKF of Kreinar & Quinn (paper sec. II-III).
+
+State (paper eq. 1 + 28, plus the gyro bias of sec. II-C), ``state.NAMES``:
+    [x, y, theta, v, omega, gyro_bias, slip_left, slip_right,
+     scale_left, scale_right, scale_track]
+
+Every measurement is processed at its own timestamp: the filter predicts to it
+(exact-arc motion, factors.motion) and updates with that sensor's model from
+``factors``. Encoder updates are preceded by the schedule's pseudo-update
+(zero slip while calibrating; hold the scale factors afterwards).
+
+Process noise (the paper's "system noise"): v and omega are random walks
+driven by white acceleration; bias, slips and scale factors are random walks
+(ProcessNoise). For a rate state r with intensity q and pose sensitivity
+J_r = d pose / d r over the step, noise entering at a uniformly distributed
+time inside the step gives
+    Q_pose,pose += q dt/3 J_r J_r^T,  Q_pose,r += q dt/2 J_r,  Q_r,r += q dt,
+which is exact for the straight-line case (the classic dt^3/3, dt^2/2, dt
+white-acceleration blocks).
+"""
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from factors import encoder, gps, gyro, pseudo, ranging, velocity
+from factors._math import wrap_angle
+from factors.motion import propagate
+from odomgraph import state as S
+from odomgraph.errors import EstimatorDivergedError
+from odomgraph.estimators.initial import InitialState, initial_state
+from odomgraph.estimators.measurements import Measurements, from_log
+from odomgraph.estimators.result import Estimate, Innovations
+from odomgraph.estimators.schedule import Hold, Schedule
+from odomgraph.io.log import Log
+
+# Sensor codes in the event stream; at equal times lower codes go first.
+WHEEL, GYRO, GPS, RANGE, VEL = range(5)
+SENSOR_NAMES = ("encoders", "gyro", "gps", "ranges", "velocity")
+
+_ENC_IDX = np.array([S.V, S.OMEGA, S.SLIP_L, S.SLIP_R, S.SCALE_L, S.SCALE_R, S.SCALE_B])
+_GYRO_IDX = np.array([S.OMEGA, S.BIAS])
+_POSE_IDX = S.POSE
+_VEL_IDX = np.array([S.V, S.OMEGA])
+_I = np.eye(S.N)
+
+
+@dataclass(frozen=True)
+class EKFOptions:
+    gate: float | None = None
+    """Mahalanobis gate on NIS for GPS/range/velocity updates (None: off)."""
+    max_scale_error: float = 0.5
+    """|scale - 1| beyond which the filter is declared diverged."""
+
+
+def event_stream(meas: Measurements, t0: float):
+    """(times, sensor codes, row indices) of every measurement at or after t0, time-ordered."""
+    ts, codes, rows = [], [], []
+    for code, src in ((WHEEL, meas.wheel.t), (GYRO, meas.gyro), (GPS, meas.gps), (RANGE, meas.ranges),
+                      (VEL, meas.velocity)):
+        if src is None:
+            continue
+        t = src if code == WHEEL else src[0]
+        sel = np.nonzero(t >= t0)[0]
+        ts.append(t[sel]); codes.append(np.full(sel.size, code)); rows.append(sel)
+    t = np.concatenate(ts); c = np.concatenate(codes); r = np.concatenate(rows)
+    order = np.lexsort((c, t))
+    return t[order], c[order], r[order]
+
+
+class EKF:
+    """One run of the filter over one log. Use ``run_ekf`` for the common case."""
+
+    def __init__(self, log: Log, schedule: Schedule = Schedule(), options: EKFOptions = EKFOptions(),
+                 init: InitialState | None = None):
+        self.log, self.robot, self.schedule, self.options = log, log.robot, schedule, options
+        self.meas = from_log(log)
+        self.init = init or initial_state(self.robot, self.meas)
+        self.x = self.init.x.copy()
+        self.P = self.init.P.copy()
+        self.t = self.init.t
+        pn = self.robot.process
+        self._q = dict(v=pn.accel**2, w=pn.yaw_accel**2, bias=pn.gyro_bias**2, scale=pn.scale**2)
+        # Slip noise in common-mode c = (sL+sR)/2 and differential d = sR-sL
+        # coordinates, mapped to (sL, sR) = (c - d/2, c + d/2).
+        self._q_slip = pn.slip**2 * np.ones((2, 2)) + 0.25 * pn.slip_differential**2 * np.array([[1, -1], [-1, 1]])
+        self._R_slip = np.eye(2) * pn.pseudo_slip_sigma**2
+        self._R_scale = np.eye(3) * pn.pseudo_scale_sigma**2
+        self._beacon_cache = None
+
+    # ------------------------------------------------------------ predict
+    def predict(self, t: float) -> None:
+        """Propagate state and covariance to absolute time t (paper eq. 2-7)."""
+        dt = t - self.t
+        if dt <= 0.0:
+            return
+        x, P, q = self.x, self.P, self._q
+        pose, J = propagate(x[0], x[1], x[2], x[3], x[4], dt)
+        F = _I.copy()
+        F[0:3, 0:5] = J
+        P = F @ P @ F.T
+        # Random-walk process noise (see module docstring).
+        Jv, Jw = J[:, 3], J[:, 4]
+        P[0:3, 0:3] += (dt / 3.0) * (q["v"] * np.outer(Jv, Jv) + q["w"] * np.outer(Jw, Jw))
+        P[0:3, 3] += 0.5 * dt * q["v"] * Jv
+        P[3, 0:3] += 0.5 * dt * q["v"] * Jv
+        P[0:3, 4] += 0.5 * dt * q["w"] * Jw
+        P[4, 0:3] += 0.5 * dt * q["w"] * Jw
+        P[3, 3] += q["v"] * dt
+        P[4, 4] += q["w"] * dt
+        P[5, 5] += q["bias"] * dt
+        P[6:8, 6:8] += self._q_slip * dt
+        if q["scale"]:
+            P[8:11, 8:11] += np.eye(3) * q["scale"] * dt
+        x[0], x[1], x[2] = pose[0], pose[1], wrap_angle(pose[2])
+        self.P = P
+        self.t = t
+
+    # ------------------------------------------------------------- update
+    def update(self, z, h, H, idx, R, hold_scale: bool = False, gate: float | None = None) -> float:
+        """Kalman update with a Jacobian H (m, k) on the states ``idx``.
+
+        Returns the NIS, or -NIS when the gate rejected the measurement.
+        ``hold_scale`` zeroes the gain rows of the scale factors (Schmidt
+        "consider" update), so they are held while their uncertainty still
+        enters every other state's covariance.
+        """
+        P = self.P
+        PHt = P[:, idx] @ H.T                    # (n, m)
+        Sm = H @ PHt[idx, :] + R                 # innovation covariance
+        y = z - h
+        Sinv = np.linalg.inv(Sm)
+        nis = float(y @ Sinv @ y)
+        if gate is not None and nis > gate:
+            return -nis
+        K = PHt @ Sinv
+        if hold_scale:
+            K[S.SCALE, :] = 0.0
+        self.x += K @ y
+        self.x[2] = wrap_angle(self.x[2])
+        # Joseph form P = (I-KH) P (I-KH)' + K R K'. It keeps P symmetric
+        # positive semi-definite, and, unlike P = (I-KH)P, it stays exact for
+        # the deliberately suboptimal gain of the consider update.
+        IKH = _I.copy()
+        IKH[:, idx] -= K @ H
+        self.P = IKH @ P @ IKH.T + K @ R @ K.T
+        return nis
+
+    def _check(self) -> None:
+        x, P = self.x, self.P
+        d = np.diagonal(P)
+        if not (np.isfinite(x).all() and np.isfinite(d).all()) or (d < -1e-12).any():
+            raise EstimatorDivergedError(f"EKF diverged at t={self.t:.3f} s: non-finite state or covariance")
+        if np.abs(x[S.SCALE] - 1.0).max() > self.options.max_scale_error:
+            raise EstimatorDivergedError(
+                f"EKF diverged at t={self.t:.3f} s: scale factors {np.round(x[S.SCALE], 3).tolist()} are "
+                f"more than {self.options.max_scale_error:.0%} from 1")
+
+    # ---------------------------------------------------------------- run
+    def run(self, progress=None) -> Estimate:
+        """Filter the whole log. ``progress(done, total)`` is called now and then."""
+        wall0 = time.perf_counter()
+        m, r, sch, opt = self.meas, self.robot, self.schedule, self.options
+        t_ev, code_ev, row_ev = event_stream(m, self.init.t)
+        n_rows = int(np.sum(code_ev == WHEEL))
+        out_t = np.empty(n_rows)
+        out_x = np.empty((n_rows, S.N))
+        out_var = np.empty((n_rows, S.N))
+        out_pose = np.empty((n_rows, 3, 3))
+        nis = {k: [] for k in range(5)}
+        t_switch = None if sch.calibrate_until is None else m.t_start + sch.calibrate_until
+        switch_sigma = None
+        track = r.track_width
+        lever_gps, lever_rng = r.gps_lever_arm, r.range_lever_arm
+        R_gyro = np.array([[r.gyro_sigma**2]])
+        R_vel = np.diag(np.square(r.velocity_sigma))
+        R_rng = np.array([[r.range_sigma**2]])
+        gate = opt.gate
+        row = 0
+        n_up = 0
+        stride = max(1, len(t_ev) // 200)
+        for k in range(len(t_ev)):
+            t, code, i = t_ev[k], code_ev[k], row_ev[k]
+            self.predict(t)
+            x = self.x
+            if code == WHEEL:
+                calibrating = t_switch is not None and t < t_switch
+                if calibrating:
+                    h, H = pseudo.zero_slip(x[6], x[7])                              # eq. 35-36
+                    self.update(np.zeros(2), h, H, S.SLIP, self._R_slip)
+                elif t_switch is not None:
+                    if switch_sigma is None:
+                        switch_sigma = np.sqrt(np.diagonal(self.P)[S.SCALE]).copy()
+                    if sch.hold is Hold.pseudo:
+                        h, H = pseudo.hold_scale(x[8], x[9], x[10])                  # eq. 37-38
+                        self.update(h.copy(), h, H, S.SCALE, self._R_scale)
+                hold = t_switch is not None and not calibrating and sch.hold is Hold.consider
+                h, H = encoder.wheel_speeds(x[3], x[4], x[6], x[7], x[8], x[9], x[10], track)  # eq. 29-34
+                s = m.wheel.sigma[i]
+                nis[WHEEL].append((t, self.update(m.wheel.m[i], h, H, _ENC_IDX, np.diag(s * s), hold)))
+                self._check()
+                out_t[row] = t
+                out_x[row] = self.x
+                out_var[row] = np.diagonal(self.P)
+                out_pose[row] = self.P[0:3, 0:3]
+                row += 1
+            elif code == GYRO:
+                h, H = gyro.yaw_rate(x[4], x[5])                                      # eq. 10-11
+                nis[GYRO].append((t, self.update(m.gyro[1][i:i + 1], h, H, _GYRO_IDX, R_gyro)))
+            elif code == GPS:
+                h, H = gps.antenna_position(x[0], x[1], x[2], lever_gps)              # eq. 8-9
+                sg = m.gps[2][i]
+                nis[GPS].append((t, self.update(m.gps[1][i], h, H, _POSE_IDX, np.eye(2) * sg * sg,
+                                                gate=gate)))
+            elif code == RANGE:
+                h, H = ranging.beacon_range(x[0], x[1], x[2], m.ranges[1][i], lever_rng)   # eq. 12-16
+                nis[RANGE].append((t, self.update(m.ranges[2][i:i + 1], h, H[:, :3], _POSE_IDX, R_rng,
+                                                  gate=gate)))
+            else:
+                h, H = velocity.body_velocity(x[3], x[4])                             # sec. VI-B
+                nis[VEL].append((t, self.update(m.velocity[1][i], h, H, _VEL_IDX, R_vel, gate=gate)))
+            n_up += 1
+            if progress is not None and k % stride == 0:
+                progress(k, len(t_ev))
+        if progress is not None:
+            progress(len(t_ev), len(t_ev))
+        self._check()
+
+        sigma = np.sqrt(np.maximum(out_var[:row], 0.0))
+        notes = list(m.notes) + [self.init.note]
+        innov = {}
+        for code, lst in nis.items():
+            if lst:
+                arr = np.asarray(lst)
+                acc = arr[:, 1] >= 0
+                if (~acc).any():
+                    notes.append(f"{SENSOR_NAMES[code]}: {int((~acc).sum())} measurement(s) rejected by the gate")
+                dof = {WHEEL: 2, GYRO: 1, GPS: 2, RANGE: 1, VEL: 2}[code]
+                innov[SENSOR_NAMES[code]] = Innovations(arr[acc, 0], arr[acc, 1], dof)
+        cal_sigma = sigma[-1, S.SCALE].copy()
+        if sch.hold is Hold.pseudo and switch_sigma is not None:
+            cal_sigma = switch_sigma  # the pseudo-update's sigma is not an uncertainty
+        return Estimate(
+            method="ekf", t=out_t[:row], mean=out_x[:row], sigma=sigma, pose_cov=out_pose[:row],
+            innovations=innov, wall_time_s=time.perf_counter() - wall0, n_updates=n_up,
+            t_switch=t_switch, calibration_sigma=cal_sigma, notes=notes,
+        )
+
+
+def run_ekf(log: Log, schedule: Schedule = Schedule(), options: EKFOptions = EKFOptions(), progress=None) -> Estimate:
+    """Run the paper's EKF over ``log``; see ``EKF``."""
+    return EKF(log, schedule, options).run(progress)

@@ -1,0 +1,34 @@
+"""The pseudo-update schedule of the paper (sec. III-D and IV).
+
+Before ``calibrate_until`` seconds (from the log's first sample) the slips are
+forced to zero and the scale factors are estimated; after it the scale factors
+are held and the slips are estimated. ``calibrate_until = 0`` is slip-only.
+``None`` applies neither (only the smoother offers that; see LOG_FORMAT).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from enum import Enum
+
+
+class Hold(str, Enum):
+    """How the EKF holds the scale factors after calibration."""
+
+    consider = "consider"
+    """Zero Kalman gain on the scale states (a Schmidt "consider" update): they
+    stay constant and their uncertainty keeps feeding the other states. The
+    reported sigma stays honest. Default."""
+    pseudo = "pseudo"
+    """The paper's literal pseudo-measurement (eq. 37-38) at every encoder
+    update. It drives the scale covariance to ~0 and makes the slips
+    overconfident; the reported scale sigma is the one at the switch."""
+
+
+@dataclass(frozen=True)
+class Schedule:
+    calibrate_until: float | None = 20.0
+    """Seconds after the log's first sample; 0 = slip only; None = no schedule."""
+    hold: Hold = Hold.consider
+
+    def calibrating(self, t_rel: float) -> bool:
+        return self.calibrate_until is not None and t_rel < self.calibrate_until

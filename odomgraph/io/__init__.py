@@ -1,0 +1,1 @@
+"""Files: log directories, robot.toml, estimate directories."""

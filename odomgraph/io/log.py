@@ -1,0 +1,252 @@
+"""The log directory of LOG_FORMAT.md: read, validate, write.
+
+A ``Log`` holds each sensor as a small frozen dataclass of 1-D numpy arrays
+sharing one clock. Reading validates everything an estimator relies on and
+raises ``LogFormatError`` naming file, line and problem.
+"""
+from __future__ import annotations
+
+import tomllib
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+
+import numpy as np
+
+from odomgraph.errors import LogFormatError
+from odomgraph.io.csvtable import read_table, write_table
+from odomgraph.io.geodesy import latlon_to_local
+from odomgraph.io.outdir import atomic_output_dir
+from odomgraph.io.robot import RobotConfig, load_robot, robot_toml
+
+
+@dataclass(frozen=True)
+class Encoders:
+    """encoders.csv: ticks counted in (t_prev, t]; the first row only starts the count."""
+    t: np.ndarray
+    ticks_left: np.ndarray
+    ticks_right: np.ndarray
+
+
+@dataclass(frozen=True)
+class WheelSpeeds:
+    """wheel_speeds.csv: surface speeds converted with the nominal ticks/m [m/s]."""
+    t: np.ndarray
+    v_left: np.ndarray
+    v_right: np.ndarray
+
+
+@dataclass(frozen=True)
+class Gps:
+    """gps.csv in the local frame: antenna x east, y north [m]; sigma [m] or None."""
+    t: np.ndarray
+    x: np.ndarray
+    y: np.ndarray
+    sigma: np.ndarray | None = None
+
+
+@dataclass(frozen=True)
+class Gyro:
+    """gyro.csv: z rate [rad/s]."""
+    t: np.ndarray
+    omega: np.ndarray
+
+
+@dataclass(frozen=True)
+class Ranges:
+    """ranges.csv: ``beacon`` indexes RobotConfig.beacons; range [m]."""
+    t: np.ndarray
+    beacon: np.ndarray
+    range: np.ndarray
+
+
+@dataclass(frozen=True)
+class Velocity:
+    """velocity.csv: independent body velocity, v [m/s], omega [rad/s]."""
+    t: np.ndarray
+    v: np.ndarray
+    omega: np.ndarray
+
+
+#: truth.csv columns: the LOG_FORMAT ones plus ``gyro_bias`` (an allowed extra, written by the simulator).
+TRUTH_COLUMNS = ("x", "y", "theta", "v", "omega", "slip_left", "slip_right", "gyro_bias")
+
+
+@dataclass(frozen=True)
+class Truth:
+    """truth.csv: ``values`` maps each present column of TRUTH_COLUMNS to its array."""
+    t: np.ndarray
+    values: dict[str, np.ndarray]
+
+    def at(self, name: str, t: np.ndarray) -> np.ndarray | None:
+        """Column ``name`` linearly interpolated at times t (None if absent).
+        Heading is interpolated on the circle."""
+        if name not in self.values:
+            return None
+        if name == "theta":
+            th = np.unwrap(self.values["theta"])
+            from factors._math import wrap_angle
+            return wrap_angle(np.interp(t, self.t, th))
+        return np.interp(t, self.t, self.values[name])
+
+
+@dataclass(frozen=True)
+class Log:
+    robot: RobotConfig
+    encoders: Encoders | None = None
+    wheel_speeds: WheelSpeeds | None = None
+    gps: Gps | None = None
+    gyro: Gyro | None = None
+    ranges: Ranges | None = None
+    velocity: Velocity | None = None
+    truth: Truth | None = None
+    truth_scales: tuple[float, float, float] | None = None
+    """(scale_left, scale_right, scale_track) where known."""
+    path: Path | None = None
+    notes: tuple[str, ...] = field(default=())
+
+    @property
+    def t_start(self) -> float:
+        return float(min(s.t[0] for s in self.sensors() if len(s.t)))
+
+    @property
+    def t_end(self) -> float:
+        return float(max(s.t[-1] for s in self.sensors() if len(s.t)))
+
+    def sensors(self):
+        return [s for s in (self.encoders, self.wheel_speeds, self.gps, self.gyro, self.ranges, self.velocity)
+                if s is not None]
+
+    def with_(self, **changes) -> "Log":
+        return replace(self, **changes)
+
+    def truncated(self, t_end: float) -> "Log":
+        """The log as it stood at time t_end: every row with t <= t_end."""
+        def cut(obj):
+            if obj is None:
+                return None
+            keep = obj.t <= t_end
+            kw = {k: (v[keep] if isinstance(v, np.ndarray) else v) for k, v in obj.__dict__.items()}
+            if isinstance(obj, Truth):
+                kw["values"] = {k: v[keep] for k, v in obj.values.items()}
+            return type(obj)(**kw)
+        return replace(self, **{k: cut(getattr(self, k)) for k in
+                                ("encoders", "wheel_speeds", "gps", "gyro", "ranges", "velocity", "truth")})
+
+
+def _optional(path: Path):
+    return path if path.is_file() else None
+
+
+def read_log(directory: Path | str) -> Log:
+    """Read and validate a log directory. Raises LogFormatError on bad input."""
+    d = Path(directory)
+    if not d.is_dir():
+        raise LogFormatError(d, "log directory does not exist")
+    robot = load_robot(d / "robot.toml")
+    enc = ws = gps = gyro = rng = vel = truth = None
+    if (p := _optional(d / "encoders.csv")):
+        c = read_table(p, ("t", "ticks_left", "ticks_right"))
+        if len(c["t"]) < 2:
+            raise LogFormatError(p, "needs at least two rows (the first only starts the count)")
+        enc = Encoders(c["t"], c["ticks_left"], c["ticks_right"])
+    if (p := _optional(d / "wheel_speeds.csv")):
+        c = read_table(p, ("t", "v_left", "v_right"))
+        if len(c["t"]) < 1:
+            raise LogFormatError(p, "has no data rows")
+        ws = WheelSpeeds(c["t"], c["v_left"], c["v_right"])
+    if enc is None and ws is None:
+        raise LogFormatError(d / "encoders.csv", "file is missing (a log needs encoders.csv or wheel_speeds.csv)")
+    if (p := _optional(d / "gps.csv")):
+        gps = _read_gps(p, robot)
+    if (p := _optional(d / "gyro.csv")):
+        c = read_table(p, ("t", "omega"))
+        gyro = Gyro(c["t"], c["omega"])
+    if (p := _optional(d / "ranges.csv")):
+        c = read_table(p, ("t", "beacon", "range"), text_columns=("beacon",))
+        idx = np.empty(len(c["t"]), dtype=np.int64)
+        known = {b.id: i for i, b in enumerate(robot.beacons)}
+        for k, (b, ln) in enumerate(zip(c["beacon"], c["_line"])):
+            if b not in known:
+                raise LogFormatError(p, f"unknown beacon '{b}' (robot.toml [range].beacons has "
+                                        f"{sorted(known) or 'none'})", int(ln))
+            idx[k] = known[b]
+        neg = c["range"] < 0
+        if neg.any():
+            raise LogFormatError(p, "negative range", int(c["_line"][np.argmax(neg)]))
+        rng = Ranges(c["t"], idx, c["range"])
+    if (p := _optional(d / "velocity.csv")):
+        c = read_table(p, ("t", "v", "omega"))
+        vel = Velocity(c["t"], c["v"], c["omega"])
+    if (p := _optional(d / "truth.csv")):
+        c = read_table(p, ("t", "x", "y"), optional=TRUTH_COLUMNS[2:])
+        truth = Truth(c["t"], {k: c[k] for k in TRUTH_COLUMNS if k in c})
+    scales = None
+    if (p := _optional(d / "truth.toml")):
+        try:
+            tt = tomllib.loads(p.read_text(encoding="utf-8"))
+        except tomllib.TOMLDecodeError as exc:
+            raise LogFormatError(p, f"malformed TOML: {exc}") from None
+        try:
+            scales = tuple(float(tt[k]) for k in ("scale_left", "scale_right", "scale_track"))
+        except KeyError as exc:
+            raise LogFormatError(p, f"missing key {exc.args[0]}") from None
+        except (TypeError, ValueError):
+            raise LogFormatError(p, "scale factors must be numbers") from None
+    return Log(robot, enc, ws, gps, gyro, rng, vel, truth, scales, path=d)
+
+
+def _read_gps(p: Path, robot: RobotConfig) -> Gps:
+    with p.open(encoding="utf-8") as fh:
+        header = next((ln for ln in fh if ln.strip() and not ln.lstrip().startswith("#")), "")
+    cols = [c.strip() for c in header.split(",")]
+    if "lat" in cols or "lon" in cols:
+        c = read_table(p, ("t", "lat", "lon"), optional=("sigma",))
+        if len(c["t"]) == 0:
+            return Gps(c["t"], c["lat"], c["lon"], None)
+        bad = (np.abs(c["lat"]) > 90) | (np.abs(c["lon"]) > 180)
+        if bad.any():
+            raise LogFormatError(p, "latitude/longitude out of range", int(c["_line"][np.argmax(bad)]))
+        o = robot.gps_origin or (c["lat"][0], c["lon"][0])
+        x, y = latlon_to_local(c["lat"], c["lon"], o[0], o[1])
+    else:
+        c = read_table(p, ("t", "x", "y"), optional=("sigma",))
+        x, y = c["x"], c["y"]
+    sigma = c.get("sigma")
+    if sigma is not None and (sigma <= 0).any():
+        raise LogFormatError(p, "sigma must be positive", int(c["_line"][np.argmax(sigma <= 0)]))
+    return Gps(c["t"], x, y, sigma)
+
+
+def write_log(log: Log, directory: Path | str) -> Path:
+    """Write ``log`` as a log directory (atomically). Returns the path."""
+    with atomic_output_dir(directory) as d:
+        (d / "robot.toml").write_text(robot_toml(log.robot), encoding="utf-8")
+        if log.encoders is not None:
+            e = log.encoders
+            write_table(d / "encoders.csv", {"t": e.t, "ticks_left": e.ticks_left, "ticks_right": e.ticks_right},
+                        {"t": "%.6f", "ticks_left": "%.0f", "ticks_right": "%.0f"})
+        if log.wheel_speeds is not None:
+            w = log.wheel_speeds
+            write_table(d / "wheel_speeds.csv", {"t": w.t, "v_left": w.v_left, "v_right": w.v_right},
+                        {"t": "%.6f", "v_left": "%.6f", "v_right": "%.6f"})
+        if log.gps is not None:
+            g = log.gps
+            cols = {"t": g.t, "x": g.x, "y": g.y, **({"sigma": g.sigma} if g.sigma is not None else {})}
+            write_table(d / "gps.csv", cols, {"t": "%.6f", "x": "%.5f", "y": "%.5f", "sigma": "%.5f"})
+        if log.gyro is not None:
+            write_table(d / "gyro.csv", {"t": log.gyro.t, "omega": log.gyro.omega}, {"t": "%.6f", "omega": "%.7f"})
+        if log.ranges is not None:
+            r = log.ranges
+            ids = np.asarray([log.robot.beacons[i].id for i in r.beacon], dtype=str)
+            write_table(d / "ranges.csv", {"t": r.t, "beacon": ids, "range": r.range}, {"t": "%.6f", "range": "%.5f"})
+        if log.velocity is not None:
+            v = log.velocity
+            write_table(d / "velocity.csv", {"t": v.t, "v": v.v, "omega": v.omega},
+                        {"t": "%.6f", "v": "%.6f", "omega": "%.6f"})
+        if log.truth is not None:
+            write_table(d / "truth.csv", {"t": log.truth.t, **log.truth.values}, {"t": "%.6f"})
+        if log.truth_scales is not None:
+            sl, sr, sb = log.truth_scales
+            (d / "truth.toml").write_text(f"scale_left = {sl!r}\nscale_right = {sr!r}\nscale_track = {sb!r}\n",
+                                          encoding="utf-8")
+    return Path(directory)

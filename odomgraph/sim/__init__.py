@@ -1,0 +1,1 @@
+"""Simulated logs: scenarios (what happens) and the simulator (what sensors see)."""
