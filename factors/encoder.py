@@ -19,6 +19,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from factors._math import shape_of
+
 INPUTS = ("v", "omega", "slip_left", "slip_right", "scale_left", "scale_right", "scale_track")
 
 
@@ -35,16 +37,16 @@ def wheel_speeds(v, omega, slip_left, slip_right, scale_left, scale_right, scale
         m: (..., 2) [m_left, m_right] as computed with nominal ticks/m [m/s].
         J: (..., 2, 7) d m / d INPUTS.
     """
-    args = np.broadcast_arrays(
-        *(np.asarray(a, dtype=float) for a in (v, omega, slip_left, slip_right, scale_left, scale_right, scale_track))
-    )
-    v, omega, sl, sr, kl, kr, kb = args
+    shape = shape_of(v, omega, slip_left, slip_right, scale_left, scale_right, scale_track)
+    sl, sr, kl, kr, kb = slip_left, slip_right, scale_left, scale_right, scale_track
     half_b = 0.5 * kb * track  # half the true track [m]
     ul = v - omega * half_b + sl  # true left surface speed [m/s]
     ur = v + omega * half_b + sr
-    m = np.stack([kl * ul, kr * ur], -1)
+    m = np.empty(shape + (2,))
+    m[..., 0] = kl * ul
+    m[..., 1] = kr * ur
 
-    J = np.zeros(v.shape + (2, 7))
+    J = np.zeros(shape + (2, 7))
     J[..., 0, 0] = kl
     J[..., 0, 1] = -kl * half_b
     J[..., 0, 2] = kl

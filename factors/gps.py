@@ -12,6 +12,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from factors._math import shape_of
+
 INPUTS = ("x", "y", "theta")
 
 
@@ -26,13 +28,15 @@ def antenna_position(x, y, theta, lever_arm):
         h: (..., 2) antenna position, world frame [m].
         J: (..., 2, 3) d h / d (x, y, theta).
     """
-    x, y, theta = np.broadcast_arrays(*(np.asarray(a, dtype=float) for a in (x, y, theta)))
+    shape = shape_of(x, y, theta)
     lx, ly = float(lever_arm[0]), float(lever_arm[1])
     c, s = np.cos(theta), np.sin(theta)
     ox = lx * c - ly * s  # lever arm rotated into the world frame
     oy = lx * s + ly * c
-    h = np.stack([x + ox, y + oy], -1)
-    J = np.zeros(x.shape + (2, 3))
+    h = np.empty(shape + (2,))
+    h[..., 0] = x + ox
+    h[..., 1] = y + oy
+    J = np.zeros(shape + (2, 3))
     J[..., 0, 0] = 1.0
     J[..., 1, 1] = 1.0
     J[..., 0, 2] = -oy

@@ -6,6 +6,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from factors._math import shape_of
+
 INPUTS = ("omega", "gyro_bias")
 
 
@@ -19,7 +21,8 @@ def yaw_rate(omega, gyro_bias):
     Returns:
         h: (..., 1) reading [rad/s]; J: (..., 1, 2) d h / d (omega, gyro_bias).
     """
-    omega, gyro_bias = np.broadcast_arrays(np.asarray(omega, dtype=float), np.asarray(gyro_bias, dtype=float))
-    h = (omega + gyro_bias)[..., None]
-    J = np.ones(omega.shape + (1, 2))
+    shape = shape_of(omega, gyro_bias)
+    h = np.empty(shape + (1,))
+    h[..., 0] = omega + gyro_bias
+    J = np.ones(shape + (1, 2))
     return h, J

@@ -24,7 +24,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from factors._math import dsinc, sinc
+from factors._math import dsinc, shape_of, sinc
 
 INPUTS = ("x", "y", "theta", "v", "omega")
 
@@ -44,18 +44,19 @@ def propagate(x, y, theta, v, omega, dt):
             Jacobian stays continuous; callers wrap).
         J: (..., 3, 5) d pose / d (x, y, theta, v, omega).
     """
-    x, y, theta, v, omega, dt = np.broadcast_arrays(
-        *(np.asarray(a, dtype=float) for a in (x, y, theta, v, omega, dt))
-    )
+    shape = shape_of(x, y, theta, v, omega, dt)
     half = 0.5 * omega * dt
     s, ds = sinc(half), dsinc(half)
     phi = theta + half
     c, sn = np.cos(phi), np.sin(phi)
     d = v * dt * s  # chord length of the arc [m]
 
-    pose = np.stack([x + d * c, y + d * sn, theta + omega * dt], -1)
+    pose = np.empty(shape + (3,))
+    pose[..., 0] = x + d * c
+    pose[..., 1] = y + d * sn
+    pose[..., 2] = theta + omega * dt
 
-    J = np.zeros(x.shape + (3, 5))
+    J = np.zeros(shape + (3, 5))
     J[..., 0, 0] = 1.0
     J[..., 1, 1] = 1.0
     J[..., 2, 2] = 1.0

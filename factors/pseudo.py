@@ -12,17 +12,28 @@ from __future__ import annotations
 
 import numpy as np
 
+from factors._math import shape_of
+
 ZERO_SLIP_INPUTS = ("slip_left", "slip_right")
 HOLD_SCALE_INPUTS = ("scale_left", "scale_right", "scale_track")
 
 
 def zero_slip(slip_left, slip_right):
     """h: (..., 2) the slips [m/s]; J: (..., 2, 2) identity."""
-    sl, sr = np.broadcast_arrays(np.asarray(slip_left, dtype=float), np.asarray(slip_right, dtype=float))
-    return np.stack([sl, sr], -1), np.broadcast_to(np.eye(2), sl.shape + (2, 2)).copy()
+    return _select(slip_left, slip_right)
 
 
 def hold_scale(scale_left, scale_right, scale_track):
     """h: (..., 3) the scale factors [-]; J: (..., 3, 3) identity."""
-    a = np.broadcast_arrays(*(np.asarray(s, dtype=float) for s in (scale_left, scale_right, scale_track)))
-    return np.stack(a, -1), np.broadcast_to(np.eye(3), a[0].shape + (3, 3)).copy()
+    return _select(scale_left, scale_right, scale_track)
+
+
+def _select(*states):
+    shape = shape_of(*states)
+    n = len(states)
+    h = np.empty(shape + (n,))
+    J = np.zeros(shape + (n, n))
+    for k, s in enumerate(states):
+        h[..., k] = s
+        J[..., k, k] = 1.0
+    return h, J

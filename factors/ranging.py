@@ -14,6 +14,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from factors._math import shape_of
+
 INPUTS = ("x", "y", "theta", "bias")
 
 _MIN_RANGE = 1e-9
@@ -31,19 +33,23 @@ def beacon_range(x, y, theta, beacon, lever_arm=(0.0, 0.0), bias=0.0):
     Returns:
         h: (..., 1) range [m]; J: (..., 1, 4) d h / d (x, y, theta, bias).
     """
-    x, y, theta, bias = np.broadcast_arrays(*(np.asarray(a, dtype=float) for a in (x, y, theta, bias)))
     beacon = np.asarray(beacon, dtype=float)
+    shape = shape_of(x, y, theta, bias, beacon[..., 0])
     lx, ly = float(lever_arm[0]), float(lever_arm[1])
     c, s = np.cos(theta), np.sin(theta)
     ox, oy = lx * c - ly * s, lx * s + ly * c
     dx = x + ox - beacon[..., 0]
     dy = y + oy - beacon[..., 1]
     r = np.hypot(dx, dy)
-    far = r > _MIN_RANGE
-    inv = np.where(far, 1.0 / np.where(far, r, 1.0), 0.0)
+    if shape == ():
+        inv = 1.0 / r if r > _MIN_RANGE else 0.0
+    else:
+        far = r > _MIN_RANGE
+        inv = np.where(far, 1.0 / np.where(far, r, 1.0), 0.0)
     ux, uy = dx * inv, dy * inv  # unit vector beacon -> antenna (0 at the singularity)
-    h = (r + bias)[..., None]
-    J = np.zeros(r.shape + (1, 4))
+    h = np.empty(shape + (1,))
+    h[..., 0] = r + bias
+    J = np.zeros(shape + (1, 4))
     J[..., 0, 0] = ux
     J[..., 0, 1] = uy
     J[..., 0, 2] = -ux * oy + uy * ox

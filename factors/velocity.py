@@ -6,6 +6,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from factors._math import shape_of
+
 INPUTS = ("v", "omega")
 
 
@@ -18,7 +20,10 @@ def body_velocity(v, omega):
     Returns:
         h: (..., 2) [v, omega]; J: (..., 2, 2) identity.
     """
-    v, omega = np.broadcast_arrays(np.asarray(v, dtype=float), np.asarray(omega, dtype=float))
-    h = np.stack([v, omega], -1)
-    J = np.broadcast_to(np.eye(2), v.shape + (2, 2)).copy()
+    shape = shape_of(v, omega)
+    h = np.empty(shape + (2,))
+    h[..., 0] = v
+    h[..., 1] = omega
+    J = np.zeros(shape + (2, 2))
+    J[..., 0, 0] = J[..., 1, 1] = 1.0
     return h, J

@@ -41,9 +41,12 @@ WHEEL, GYRO, GPS, RANGE, VEL = range(5)
 SENSOR_NAMES = ("encoders", "gyro", "gps", "ranges", "velocity")
 
 _ENC_IDX = np.array([S.V, S.OMEGA, S.SLIP_L, S.SLIP_R, S.SCALE_L, S.SCALE_R, S.SCALE_B])
-_GYRO_IDX = np.array([S.OMEGA, S.BIAS])
-_POSE_IDX = S.POSE
-_VEL_IDX = np.array([S.V, S.OMEGA])
+# Contiguous blocks as slices: views instead of fancy-indexing copies in the hot loop.
+_GYRO_IDX = slice(S.OMEGA, S.BIAS + 1)
+_POSE_IDX = slice(S.X, S.THETA + 1)
+_VEL_IDX = slice(S.V, S.OMEGA + 1)
+_SLIP_IDX = slice(S.SLIP_L, S.SLIP_R + 1)
+_SCALE_IDX = slice(S.SCALE_L, S.SCALE_B + 1)
 _I = np.eye(S.N)
 
 
@@ -68,6 +71,40 @@ def event_stream(meas: Measurements, t0: float):
     t = np.concatenate(ts); c = np.concatenate(codes); r = np.concatenate(rows)
     order = np.lexsort((c, t))
     return t[order], c[order], r[order]
+
+
+def add_process_noise(P: np.ndarray, J: np.ndarray, dt: float, q: dict, q_slip: np.ndarray) -> None:
+    """Add the discrete process noise of one step to P (11, 11) in place.
+
+    J: (3, 5) motion Jacobian of the step; q: intensities (see ProcessNoise)
+    squared, keys v, w, bias, scale; q_slip: (2, 2) slip intensity matrix.
+    See the module docstring for the derivation; G = [J_v, J_omega].
+    """
+    G = J[:, 3:5]
+    qv, qw = q["v"], q["w"]
+    Gq = G * (qv, qw)
+    P[0:3, 0:3] += (dt / 3.0) * (Gq @ G.T)
+    P[0:3, 3:5] += (0.5 * dt) * Gq
+    P[3:5, 0:3] += (0.5 * dt) * Gq.T
+    P[3, 3] += qv * dt
+    P[4, 4] += qw * dt
+    P[5, 5] += q["bias"] * dt
+    P[6:8, 6:8] += q_slip * dt
+    if q["scale"]:
+        P[8:11, 8:11] += np.eye(3) * q["scale"] * dt
+
+
+def _inv_small(A: np.ndarray) -> np.ndarray:
+    """Inverse of a 1x1 or 2x2 innovation covariance in closed form (np.linalg.inv
+    costs more than the rest of a scalar update); larger ones go to LAPACK."""
+    m = A.shape[0]
+    if m == 1:
+        return 1.0 / A
+    if m == 2:
+        a, b, c, d = A[0, 0], A[0, 1], A[1, 0], A[1, 1]
+        det = a * d - b * c
+        return np.array([[d, -b], [-c, a]]) / det
+    return np.linalg.inv(A)
 
 
 class EKF:
@@ -101,19 +138,7 @@ class EKF:
         F = _I.copy()
         F[0:3, 0:5] = J
         P = F @ P @ F.T
-        # Random-walk process noise (see module docstring).
-        Jv, Jw = J[:, 3], J[:, 4]
-        P[0:3, 0:3] += (dt / 3.0) * (q["v"] * np.outer(Jv, Jv) + q["w"] * np.outer(Jw, Jw))
-        P[0:3, 3] += 0.5 * dt * q["v"] * Jv
-        P[3, 0:3] += 0.5 * dt * q["v"] * Jv
-        P[0:3, 4] += 0.5 * dt * q["w"] * Jw
-        P[4, 0:3] += 0.5 * dt * q["w"] * Jw
-        P[3, 3] += q["v"] * dt
-        P[4, 4] += q["w"] * dt
-        P[5, 5] += q["bias"] * dt
-        P[6:8, 6:8] += self._q_slip * dt
-        if q["scale"]:
-            P[8:11, 8:11] += np.eye(3) * q["scale"] * dt
+        add_process_noise(P, J, dt, q, self._q_slip)
         x[0], x[1], x[2] = pose[0], pose[1], wrap_angle(pose[2])
         self.P = P
         self.t = t
@@ -131,13 +156,13 @@ class EKF:
         PHt = P[:, idx] @ H.T                    # (n, m)
         Sm = H @ PHt[idx, :] + R                 # innovation covariance
         y = z - h
-        Sinv = np.linalg.inv(Sm)
+        Sinv = _inv_small(Sm)
         nis = float(y @ Sinv @ y)
         if gate is not None and nis > gate:
             return -nis
         K = PHt @ Sinv
         if hold_scale:
-            K[S.SCALE, :] = 0.0
+            K[_SCALE_IDX, :] = 0.0
         self.x += K @ y
         self.x[2] = wrap_angle(self.x[2])
         # Joseph form P = (I-KH) P (I-KH)' + K R K'. It keeps P symmetric
@@ -189,14 +214,15 @@ class EKF:
                 calibrating = t_switch is not None and t < t_switch
                 if calibrating:
                     h, H = pseudo.zero_slip(x[6], x[7])                              # eq. 35-36
-                    self.update(np.zeros(2), h, H, S.SLIP, self._R_slip)
+                    self.update(np.zeros(2), h, H, _SLIP_IDX, self._R_slip)
                 elif t_switch is not None:
                     if switch_sigma is None:
                         switch_sigma = np.sqrt(np.diagonal(self.P)[S.SCALE]).copy()
                     if sch.hold is Hold.pseudo:
                         h, H = pseudo.hold_scale(x[8], x[9], x[10])                  # eq. 37-38
-                        self.update(h.copy(), h, H, S.SCALE, self._R_scale)
+                        self.update(h.copy(), h, H, _SCALE_IDX, self._R_scale)
                 hold = t_switch is not None and not calibrating and sch.hold is Hold.consider
+                x = self.x  # the pseudo-update has moved the state
                 h, H = encoder.wheel_speeds(x[3], x[4], x[6], x[7], x[8], x[9], x[10], track)  # eq. 29-34
                 s = m.wheel.sigma[i]
                 nis[WHEEL].append((t, self.update(m.wheel.m[i], h, H, _ENC_IDX, np.diag(s * s), hold)))

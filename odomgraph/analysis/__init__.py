@@ -1,0 +1,1 @@
+"""Metrics against truth, consistency, plots and reports (no estimation here)."""

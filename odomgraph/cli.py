@@ -1,0 +1,253 @@
+"""The ``odomgraph`` command line: a thin layer over ``odomgraph.pipeline``.
+
+Heavy imports happen inside the commands so that ``--help`` is instant.
+Known errors become one line on stderr and exit code 1.
+"""
+from __future__ import annotations
+
+import functools
+import sys
+from enum import Enum
+from pathlib import Path
+from typing import Annotated, Optional
+
+import typer
+
+app = typer.Typer(
+    help="Wheel-odometry error estimation (scale factors + per-wheel slip) for differential-drive robots.\n\n"
+         "Logs and outputs follow LOG_FORMAT.md. Start with `odomgraph demo`.",
+    no_args_is_help=True, add_completion=False, pretty_exceptions_enable=False,
+)
+
+
+class ScenarioName(str, Enum):
+    paper = "paper"
+    yard = "yard"
+
+
+class MethodName(str, Enum):
+    ekf = "ekf"
+
+
+class HoldName(str, Enum):
+    consider = "consider"
+    pseudo = "pseudo"
+
+
+def _user_errors(fn):
+    """Turn the project's known errors into one line and exit 1."""
+    @functools.wraps(fn)
+    def wrapper(*args, **kwargs):
+        from odomgraph.errors import OdomgraphError
+        try:
+            return fn(*args, **kwargs)
+        except OdomgraphError as exc:
+            typer.echo(f"odomgraph: error: {exc}", err=True)
+            raise typer.Exit(code=1)
+        except KeyboardInterrupt:
+            typer.echo("odomgraph: interrupted; nothing was written", err=True)
+            raise typer.Exit(code=130)
+    return wrapper
+
+
+class _Progress:
+    """A rich progress bar on stderr, fed by an estimator's progress(done, total)."""
+
+    def __init__(self, label: str):
+        from rich.console import Console
+        from rich.progress import BarColumn, Progress, TimeElapsedColumn, TimeRemainingColumn, TextColumn
+        self._p = Progress(TextColumn(label), BarColumn(), TextColumn("{task.percentage:>3.0f}%"),
+                           TimeElapsedColumn(), TimeRemainingColumn(), console=Console(stderr=True),
+                           transient=True)
+        self._task = None
+
+    def __enter__(self):
+        self._p.__enter__()
+        return self
+
+    def __exit__(self, *exc):
+        return self._p.__exit__(*exc)
+
+    def __call__(self, done: int, total: int):
+        if self._task is None:
+            self._task = self._p.add_task("", total=total)
+        self._p.update(self._task, completed=done)
+
+
+def _parse_schedule(calibrate_until: str, hold: HoldName):
+    from odomgraph.errors import OdomgraphError
+    from odomgraph.estimators.schedule import Hold, Schedule
+    if calibrate_until.strip().lower() == "none":
+        raise OdomgraphError("--calibrate-until none (slip and scale together) needs a smoother; "
+                             "the EKF needs a schedule (use a number of seconds, 0 = slip only)")
+    try:
+        T = float(calibrate_until)
+    except ValueError:
+        raise OdomgraphError(f"--calibrate-until: expected seconds or 'none', got {calibrate_until!r}") from None
+    if T < 0:
+        raise OdomgraphError("--calibrate-until must not be negative")
+    return Schedule(calibrate_until=T, hold=Hold(hold.value))
+
+
+def _print_summary(s: dict) -> None:
+    cal = s["calibration"]
+    typer.echo(f"{s['method']}: {s['n_steps']} rows, {s['n_updates']} updates in {s['wall_time_s']:.2f} s "
+               f"({s['updates_per_second']:.0f} updates/s)")
+    truth = s.get("truth_scales", {})
+    for k, v in cal.items():
+        tv = f"   truth {truth[k]:.4f}" if k in truth else ""
+        typer.echo(f"  {k:<12} {v['value']:.4f} ± {v['sigma']:.4f}{tv}")
+    if "errors" in s:
+        e = s["errors"]
+        slip = ", ".join(f"{w} {v:.3f}" for w, v in e["rms_slip_mps"].items())
+        typer.echo(f"  RMS position error {e['rms_position_m']:.3f} m; RMS slip error after calibration: {slip} m/s")
+    for n in s["notes"]:
+        typer.echo(f"  note: {n}")
+
+
+@app.command()
+@_user_errors
+def simulate(
+    output: Annotated[Path, typer.Option("--output", "-o", help="Log directory to write.")],
+    scenario: Annotated[ScenarioName, typer.Option(help="paper: Kreinar & Quinn sec. IV; yard: a second robot.")]
+    = ScenarioName.paper,
+    seed: Annotated[int, typer.Option(help="Random seed.")] = 0,
+    duration: Annotated[Optional[float], typer.Option(help="Length of the log [s] (scenario default if unset).")]
+    = None,
+    encoder_hz: Annotated[Optional[float], typer.Option(help="Encoder rate [Hz].")] = None,
+    gyro_hz: Annotated[Optional[float], typer.Option(help="Gyro rate [Hz]; 0 = no gyro.")] = None,
+    gps_hz: Annotated[Optional[float], typer.Option(help="GPS rate [Hz]; 0 = no GPS.")] = None,
+    range_hz: Annotated[Optional[float], typer.Option(help="Range rate per beacon [Hz]; >0 adds 3 beacons.")] = None,
+    velocity_hz: Annotated[Optional[float], typer.Option(help="Body-velocity sensor rate [Hz].")] = None,
+    gps_sigma: Annotated[Optional[float], typer.Option(help="GPS noise 1-sigma [m] (eq. 39).")] = None,
+    gyro_sigma: Annotated[Optional[float], typer.Option(help="Gyro noise 1-sigma [rad/s] (eq. 40).")] = None,
+    range_sigma: Annotated[Optional[float], typer.Option(help="Range noise 1-sigma [m].")] = None,
+    encoder_sigma: Annotated[Optional[str], typer.Option(help="Wheel-speed noise 'a,b': a + b|v| m/s (eq. 41).")]
+    = None,
+    scales: Annotated[Optional[str], typer.Option(help="True scale factors 'left,right,track'.")] = None,
+    slip: Annotated[Optional[list[str]], typer.Option(
+        help="Slip event 'wheel:start:end:speed' (s, s, m/s); repeat for more. Replaces the scenario's.")] = None,
+    no_slip: Annotated[bool, typer.Option("--no-slip", help="No slip events at all.")] = False,
+    initial: Annotated[bool, typer.Option(help="Write the true start pose as robot.toml [initial].")] = False,
+):
+    """Simulate a scenario and write a log directory with truth.csv and truth.toml."""
+    from odomgraph.errors import OdomgraphError
+    from odomgraph.io.log import write_log
+    from odomgraph.sim.scenarios import SCENARIOS, SlipEvent, beacons_around
+    from odomgraph.sim.simulate import simulate as run_sim
+
+    sc = SCENARIOS[scenario.value]() if duration is None else SCENARIOS[scenario.value](duration)
+    if duration is not None and duration <= 0:
+        raise OdomgraphError("--duration must be positive")
+
+    def floats(text, n, opt):
+        try:
+            vals = tuple(float(v) for v in text.split(","))
+        except ValueError:
+            vals = ()
+        if len(vals) != n:
+            raise OdomgraphError(f"{opt}: expected {n} comma-separated numbers, got {text!r}")
+        return vals
+
+    rates = {k: v for k, v in dict(encoders=encoder_hz, gyro=gyro_hz, gps=gps_hz, ranges=range_hz,
+                                     velocity=velocity_hz).items() if v is not None}
+    if any(v < 0 for v in rates.values()) or rates.get("encoders", 1) == 0:
+        raise OdomgraphError("sensor rates must be >= 0 and the encoder rate > 0")
+    sc = sc.with_(rates=sc.rates.__class__(**{**sc.rates.__dict__, **rates}))
+    robot = sc.robot
+    for name, val in (("gps_sigma", gps_sigma), ("gyro_sigma", gyro_sigma), ("range_sigma", range_sigma)):
+        if val is not None:
+            if val <= 0:
+                raise OdomgraphError(f"--{name.replace('_', '-')} must be positive")
+            robot = robot.with_(**{name: val})
+    if encoder_sigma is not None:
+        robot = robot.with_(encoder_sigma=floats(encoder_sigma, 2, "--encoder-sigma"))
+    if sc.rates.ranges > 0 and not robot.beacons:
+        box = run_sim(sc.with_(rates=sc.rates.__class__(encoders=sc.rates.encoders, gyro=0, gps=0)), seed).truth
+        robot = robot.with_(beacons=beacons_around(box.values["x"].min(), box.values["x"].max(),
+                                                   box.values["y"].min(), box.values["y"].max()))
+    sc = sc.with_(robot=robot, write_initial=initial)
+    if scales is not None:
+        sc = sc.with_(scales=floats(scales, 3, "--scales"))
+    if no_slip:
+        sc = sc.with_(slips=())
+    elif slip:
+        events = []
+        for s in slip:
+            parts = s.split(":")
+            if len(parts) != 4 or parts[0] not in ("left", "right"):
+                raise OdomgraphError(f"--slip: expected 'left|right:start:end:speed', got {s!r}")
+            try:
+                events.append(SlipEvent(parts[0], float(parts[1]), float(parts[2]), float(parts[3])))
+            except ValueError:
+                raise OdomgraphError(f"--slip: expected numbers in {s!r}") from None
+        sc = sc.with_(slips=tuple(events))
+    log = run_sim(sc, seed)
+    write_log(log, output)
+    typer.echo(f"wrote {output} ({sc.name}, {sc.duration:g} s, seed {seed})")
+
+
+@app.command()
+@_user_errors
+def estimate(
+    log_dir: Annotated[Path, typer.Argument(metavar="LOG", help="Log directory (LOG_FORMAT.md).")],
+    output: Annotated[Path, typer.Option("--output", "-o", help="Estimate directory to write.")],
+    method: Annotated[MethodName, typer.Option(help="Estimator.")] = MethodName.ekf,
+    calibrate_until: Annotated[str, typer.Option(
+        help="Seconds from the log start to estimate scale factors with slip forced to 0; "
+             "after it the scale factors are held and slip is estimated. 0 = slip only.")] = "20",
+    hold: Annotated[HoldName, typer.Option(
+        help="consider: hold scale factors with zero gain, keep honest sigma (default); "
+             "pseudo: the paper's literal pseudo-update (eq. 37-38).")] = HoldName.consider,
+    gate: Annotated[Optional[float], typer.Option(
+        help="Reject GPS/range/velocity updates whose NIS exceeds this (e.g. 16). Default: off.")] = None,
+):
+    """Estimate states and odometry errors of a log; writes states.csv, trajectory.tum, summary.json."""
+    from odomgraph.io.log import read_log
+    from odomgraph.pipeline import Method, estimate_to_dir
+    schedule = _parse_schedule(calibrate_until, hold)
+    log = read_log(log_dir)
+    with _Progress(f"{method.value}") as bar:
+        s = estimate_to_dir(log, output, Method(method.value), schedule, progress=bar, gate=gate)
+    _print_summary(s)
+    typer.echo(f"wrote {output}")
+
+
+@app.command()
+@_user_errors
+def demo(
+    output: Annotated[Path, typer.Option("--output", "-o", help="Directory for the log, estimates and figure.")]
+    = Path("demo-out"),
+    seed: Annotated[int, typer.Option(help="Random seed of the simulation.")] = 0,
+):
+    """Simulate the paper's scenario (sec. IV), run the EKF and draw the paper's figures 1-3."""
+    from odomgraph.analysis.plots import overview_figure
+    from odomgraph.estimators.schedule import Schedule
+    from odomgraph.io.estimate import write_estimate
+    from odomgraph.io.log import write_log
+    from odomgraph.io.outdir import atomic_output_dir
+    from odomgraph.pipeline import Method, estimate as run_estimate, summary
+    from odomgraph.sim.scenarios import paper
+    from odomgraph.sim.simulate import simulate as run_sim
+
+    sc = paper()
+    log = run_sim(sc, seed)
+    schedule = Schedule(calibrate_until=sc.calibrate_until)
+    with _Progress("ekf") as bar:
+        est = run_estimate(log, Method.ekf, schedule, progress=bar)
+    s = summary(est, log, schedule)
+    with atomic_output_dir(output) as d:
+        write_log(log, d / "log")
+        write_estimate(est, d / "ekf", s)
+        overview_figure([est], log, d / "figure.png",
+                        title=f"odomgraph demo: paper scenario (sec. IV), seed {seed}")
+    _print_summary(s)
+    typer.echo(f"wrote {output}/log, {output}/ekf and {output}/figure.png")
+
+
+def main() -> None:
+    app()
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,53 @@
+"""The estimate directory of LOG_FORMAT.md: states.csv, trajectory.tum, summary.json."""
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+
+from odomgraph import state as S
+from odomgraph.errors import LogFormatError
+from odomgraph.estimators.result import Estimate
+from odomgraph.io.csvtable import read_table, write_table
+from odomgraph.io.outdir import atomic_output_dir
+
+
+def states_columns(est: Estimate) -> dict[str, np.ndarray]:
+    cols = {"t": est.t}
+    cols.update({name: est.mean[:, i] for i, name in enumerate(S.NAMES)})
+    cols.update({f"sigma_{name}": est.sigma[:, i] for i, name in enumerate(S.NAMES)})
+    return cols
+
+
+def write_states(path: Path, est: Estimate) -> None:
+    write_table(path, states_columns(est), {k: "%.9g" for k in states_columns(est)} | {"t": "%.6f"})
+
+
+def tum_text(est: Estimate) -> str:
+    """TUM trajectory lines ``t x y z qx qy qz qw`` (z = 0, yaw-only quaternion)."""
+    th = est.mean[:, S.THETA]
+    rows = np.column_stack([est.t, est.mean[:, S.X], est.mean[:, S.Y], np.zeros_like(th), np.zeros_like(th),
+                            np.zeros_like(th), np.sin(th / 2), np.cos(th / 2)])
+    return "".join(f"{r[0]:.6f} {r[1]:.6f} {r[2]:.6f} 0 0 0 {r[6]:.9f} {r[7]:.9f}\n" for r in rows)
+
+
+def write_estimate(est: Estimate, out_dir: Path | str, summary: dict) -> Path:
+    """Write ``est`` and its ``summary`` dict (see ``summary``) atomically."""
+    with atomic_output_dir(out_dir) as d:
+        write_states(d / "states.csv", est)
+        (d / "trajectory.tum").write_text(tum_text(est), encoding="utf-8")
+        if est.online is not None:
+            write_states(d / "online.csv", est.online)
+        (d / "summary.json").write_text(json.dumps(summary, indent=2) + "\n", encoding="utf-8")
+    return Path(out_dir)
+
+
+def read_states(path: Path | str) -> Estimate:
+    """Read a states.csv back into an Estimate (for reports and comparisons)."""
+    c = read_table(Path(path), ("t", *S.NAMES, *(f"sigma_{n}" for n in S.NAMES)))
+    mean = np.column_stack([c[n] for n in S.NAMES])
+    sigma = np.column_stack([c[f"sigma_{n}"] for n in S.NAMES])
+    if len(c["t"]) == 0:
+        raise LogFormatError(path, "has no rows")
+    return Estimate(method=Path(path).parent.name, t=c["t"], mean=mean, sigma=sigma)
