@@ -44,8 +44,8 @@ class FilterPyEKF(EKF):
         fp.predict()
         self.x, self.P, self.t = fp.x, fp.P, t
 
-    def update(self, z, h, H, idx, R, hold_scale=False, gate=None) -> float:
-        assert not hold_scale and gate is None
+    def update(self, z, h, H, idx, R, gate=None) -> float:
+        assert not self.holding_scale and gate is None
         Hfull = np.zeros((H.shape[0], S.N))
         Hfull[:, idx] = H
         fp = self.fp

@@ -39,6 +39,7 @@ from odomgraph.io.log import Log
 # Sensor codes in the event stream; at equal times lower codes go first.
 WHEEL, GYRO, GPS, RANGE, VEL = range(5)
 SENSOR_NAMES = ("encoders", "gyro", "gps", "ranges", "velocity")
+_DOF = (2, 1, 2, 1, 2)  # measurement dimension of each sensor
 
 _ENC_IDX = np.array([S.V, S.OMEGA, S.SLIP_L, S.SLIP_R, S.SCALE_L, S.SCALE_R, S.SCALE_B])
 # Contiguous blocks as slices: views instead of fancy-indexing copies in the hot loop.
@@ -56,6 +57,9 @@ class EKFOptions:
     """Mahalanobis gate on NIS for GPS/range/velocity updates (None: off)."""
     max_scale_error: float = 0.5
     """|scale - 1| beyond which the filter is declared diverged."""
+    max_mean_nis: float = 50.0
+    """Diverged when a sensor's running mean NIS (about its last 50 updates)
+    exceeds this many times its dimension: the filter no longer explains the data."""
 
 
 def event_stream(meas: Measurements, t0: float):
@@ -122,10 +126,14 @@ class EKF:
         self._q = dict(v=pn.accel**2, w=pn.yaw_accel**2, bias=pn.gyro_bias**2, scale=pn.scale**2)
         # Slip noise in common-mode c = (sL+sR)/2 and differential d = sR-sL
         # coordinates, mapped to (sL, sR) = (c - d/2, c + d/2).
-        self._q_slip = pn.slip**2 * np.ones((2, 2)) + 0.25 * pn.slip_differential**2 * np.array([[1, -1], [-1, 1]])
+        q_d = pn.slip_differential
+        if q_d is None:
+            has_yaw_sensor = self.meas.gyro is not None or self.meas.velocity is not None
+            q_d = 1.0 if has_yaw_sensor else 0.02
+        self._q_slip = pn.slip**2 * np.ones((2, 2)) + 0.25 * q_d**2 * np.array([[1, -1], [-1, 1]])
         self._R_slip = np.eye(2) * pn.pseudo_slip_sigma**2
         self._R_scale = np.eye(3) * pn.pseudo_scale_sigma**2
-        self._beacon_cache = None
+        self.holding_scale = False
 
     # ------------------------------------------------------------ predict
     def predict(self, t: float) -> None:
@@ -144,13 +152,13 @@ class EKF:
         self.t = t
 
     # ------------------------------------------------------------- update
-    def update(self, z, h, H, idx, R, hold_scale: bool = False, gate: float | None = None) -> float:
+    def update(self, z, h, H, idx, R, gate: float | None = None) -> float:
         """Kalman update with a Jacobian H (m, k) on the states ``idx``.
 
         Returns the NIS, or -NIS when the gate rejected the measurement.
-        ``hold_scale`` zeroes the gain rows of the scale factors (Schmidt
-        "consider" update), so they are held while their uncertainty still
-        enters every other state's covariance.
+        While ``self.holding_scale`` is set, the gain rows of the scale
+        factors are zero (Schmidt "consider" update): they are held, while
+        their uncertainty still enters every other state's covariance.
         """
         P = self.P
         PHt = P[:, idx] @ H.T                    # (n, m)
@@ -161,7 +169,7 @@ class EKF:
         if gate is not None and nis > gate:
             return -nis
         K = PHt @ Sinv
-        if hold_scale:
+        if self.holding_scale:
             K[_SCALE_IDX, :] = 0.0
         self.x += K @ y
         self.x[2] = wrap_angle(self.x[2])
@@ -205,27 +213,30 @@ class EKF:
         gate = opt.gate
         row = 0
         n_up = 0
+        nis_ema = [float(d) for d in _DOF]
+        nis_clip = [10.0 * opt.max_mean_nis * d for d in _DOF]
+        rej_ema = [0.0] * len(_DOF)
+        n_seen = [0] * len(_DOF)
         stride = max(1, len(t_ev) // 200)
         for k in range(len(t_ev)):
             t, code, i = t_ev[k], code_ev[k], row_ev[k]
             self.predict(t)
+            if switch_sigma is None and t_switch is not None and t >= t_switch:
+                # The schedule switches: from here on every update holds the scale factors.
+                switch_sigma = np.sqrt(np.diagonal(self.P)[S.SCALE]).copy()
+                self.holding_scale = sch.hold is Hold.consider
             x = self.x
             if code == WHEEL:
-                calibrating = t_switch is not None and t < t_switch
-                if calibrating:
+                if switch_sigma is None and t_switch is not None:
                     h, H = pseudo.zero_slip(x[6], x[7])                              # eq. 35-36
                     self.update(np.zeros(2), h, H, _SLIP_IDX, self._R_slip)
-                elif t_switch is not None:
-                    if switch_sigma is None:
-                        switch_sigma = np.sqrt(np.diagonal(self.P)[S.SCALE]).copy()
-                    if sch.hold is Hold.pseudo:
-                        h, H = pseudo.hold_scale(x[8], x[9], x[10])                  # eq. 37-38
-                        self.update(h.copy(), h, H, _SCALE_IDX, self._R_scale)
-                hold = t_switch is not None and not calibrating and sch.hold is Hold.consider
+                elif switch_sigma is not None and sch.hold is Hold.pseudo:
+                    h, H = pseudo.hold_scale(x[8], x[9], x[10])                      # eq. 37-38
+                    self.update(h.copy(), h, H, _SCALE_IDX, self._R_scale)
                 x = self.x  # the pseudo-update has moved the state
                 h, H = encoder.wheel_speeds(x[3], x[4], x[6], x[7], x[8], x[9], x[10], track)  # eq. 29-34
                 s = m.wheel.sigma[i]
-                nis[WHEEL].append((t, self.update(m.wheel.m[i], h, H, _ENC_IDX, np.diag(s * s), hold)))
+                nis[WHEEL].append((t, self.update(m.wheel.m[i], h, H, _ENC_IDX, np.diag(s * s))))
                 self._check()
                 out_t[row] = t
                 out_x[row] = self.x
@@ -247,6 +258,21 @@ class EKF:
             else:
                 h, H = velocity.body_velocity(x[3], x[4])                             # sec. VI-B
                 nis[VEL].append((t, self.update(m.velocity[1][i], h, H, _VEL_IDX, R_vel, gate=gate)))
+            # Divergence watch: a running mean of each sensor's NIS. One gross
+            # outlier is clipped so it cannot trip it; a sustained mismatch does.
+            # A gated (rejected) measurement counts at the gate, and the share
+            # of rejections is watched too: a lost filter rejects everything.
+            nis_k = nis[code][-1][1]
+            rejected = nis_k < 0
+            nis_k = min(gate if rejected else nis_k, nis_clip[code])
+            ema = nis_ema[code] = 0.98 * nis_ema[code] + 0.02 * nis_k
+            rej = rej_ema[code] = 0.98 * rej_ema[code] + 0.02 * rejected
+            n_seen[code] += 1
+            if n_seen[code] > 100 and (ema > opt.max_mean_nis * _DOF[code] or rej > 0.5):
+                what = (f"the running mean NIS of {SENSOR_NAMES[code]} is {ema:.0f} (expected {_DOF[code]})"
+                        if not rej > 0.5 else f"the gate rejects {rej:.0%} of {SENSOR_NAMES[code]}")
+                raise EstimatorDivergedError(f"EKF diverged at t={t:.3f} s: {what}; the model no longer "
+                                             "explains the data")
             n_up += 1
             if progress is not None and k % stride == 0:
                 progress(k, len(t_ev))
@@ -263,8 +289,7 @@ class EKF:
                 acc = arr[:, 1] >= 0
                 if (~acc).any():
                     notes.append(f"{SENSOR_NAMES[code]}: {int((~acc).sum())} measurement(s) rejected by the gate")
-                dof = {WHEEL: 2, GYRO: 1, GPS: 2, RANGE: 1, VEL: 2}[code]
-                innov[SENSOR_NAMES[code]] = Innovations(arr[acc, 0], arr[acc, 1], dof)
+                innov[SENSOR_NAMES[code]] = Innovations(arr[acc, 0], arr[acc, 1], _DOF[code])
         cal_sigma = sigma[-1, S.SCALE].copy()
         if sch.hold is Hold.pseudo and switch_sigma is not None:
             cal_sigma = switch_sigma  # the pseudo-update's sigma is not an uncertainty

@@ -50,11 +50,14 @@ class ProcessNoise:
 
     Common-mode slip trades off against v and is seen only through absolute
     sensors, so a large intensity only adds noise."""
-    slip_differential: float = 1.0
+    slip_differential: float | None = None
     """Differential slip random walk, of slip_right - slip_left [(m/s)/sqrt(s)].
 
-    The gyro pins it within a few mm/s, so it can follow a wheel that starts
-    spinning within a few updates."""
+    None picks by the log: 1.0 when it has a yaw-rate sensor (gyro or velocity
+    sensor), which pins differential slip within a few mm/s, so the estimate
+    can follow a wheel that starts spinning within a few updates; 0.02 when it
+    has none, because then a differential slip looks exactly like a turn and a
+    large intensity lets the filter trade heading for slip."""
     gyro_bias: float = 1e-3
     """Gyro bias random walk [(rad/s)/sqrt(s)]."""
     scale: float = 0.0
@@ -253,5 +256,6 @@ def robot_toml(cfg: RobotConfig) -> str:
         i = cfg.initial
         tables["initial"] = {"x": i.x, "y": i.y, "theta": i.theta, "sigma": i.sigma}
     if cfg.process != ProcessNoise():
-        tables["process"] = {k: getattr(cfg.process, k) for k in cfg.process.__dataclass_fields__}
+        tables["process"] = {k: getattr(cfg.process, k) for k in cfg.process.__dataclass_fields__
+                             if getattr(cfg.process, k) is not None}
     return dump_toml(tables)

@@ -1,0 +1,148 @@
+"""Log reading/writing and the bad-input contract: one clear error naming the
+file, the line and the problem."""
+import numpy as np
+import pytest
+
+from odomgraph.errors import LogFormatError
+from odomgraph.io.geodesy import latlon_to_local
+from odomgraph.io.log import read_log, write_log
+from odomgraph.io.robot import Beacon, RobotConfig, load_robot, robot_toml
+from tests.conftest import replace_line
+
+
+def test_roundtrip_preserves_every_sensor(paper_log, paper_log_dir):
+    back = read_log(paper_log_dir)
+    assert back.robot == paper_log.robot
+    assert back.truth_scales == paper_log.truth_scales
+    np.testing.assert_array_equal(back.encoders.ticks_left, paper_log.encoders.ticks_left)
+    np.testing.assert_allclose(back.encoders.t, paper_log.encoders.t, atol=1e-6)
+    np.testing.assert_allclose(back.gps.x, paper_log.gps.x, atol=1e-5)
+    np.testing.assert_allclose(back.gyro.omega, paper_log.gyro.omega, atol=1e-7)
+    for k in ("x", "y", "theta", "slip_left", "slip_right"):
+        np.testing.assert_allclose(back.truth.values[k], paper_log.truth.values[k], atol=1e-12)
+
+
+def test_robot_toml_roundtrip(tmp_path):
+    cfg = RobotConfig(1500.0, 1520.5, 0.42, gps_lever_arm=(0.25, 0.12),
+                      beacons=(Beacon("A", 0.0, 1.5), Beacon("B 2", -3.0, 4.0)), gps_origin=(41.5, -81.6))
+    p = tmp_path / "robot.toml"
+    p.write_text(robot_toml(cfg))
+    assert load_robot(p) == cfg
+
+
+def expect_error(log_dir, *fragments):
+    with pytest.raises(LogFormatError) as exc:
+        read_log(log_dir)
+    msg = str(exc.value)
+    assert "\n" not in msg
+    for f in fragments:
+        assert f in msg, msg
+    return msg
+
+
+def test_missing_encoder_file(log_copy):
+    (log_copy / "encoders.csv").unlink()
+    expect_error(log_copy, "encoders.csv", "missing", "wheel_speeds.csv")
+
+
+def test_missing_column(log_copy):
+    replace_line(log_copy / "gps.csv", 1, "t,x,why")
+    expect_error(log_copy, "gps.csv:1", "missing column(s) y")
+
+
+def test_time_not_increasing(log_copy):
+    p = log_copy / "gyro.csv"
+    lines = p.read_text().splitlines()
+    t_prev = lines[9].split(",")[0]
+    replace_line(p, 11, f"{t_prev},0.1")
+    expect_error(log_copy, "gyro.csv:11", "time does not increase")
+
+
+def test_nan_value(log_copy):
+    p = log_copy / "encoders.csv"
+    t = p.read_text().splitlines()[4].split(",")[0]
+    replace_line(p, 5, f"{t},nan,3")
+    expect_error(log_copy, "encoders.csv:5", "ticks_left", "not a finite number")
+
+
+def test_non_numeric_value(log_copy):
+    p = log_copy / "gps.csv"
+    t = p.read_text().splitlines()[6].split(",")[0]
+    replace_line(p, 7, f"{t},12..5,3.0")
+    expect_error(log_copy, "gps.csv:7", "'12..5' is not a number")
+
+
+def test_wrong_field_count(log_copy):
+    replace_line(log_copy / "gyro.csv", 3, "1.0,2.0,3.0")
+    expect_error(log_copy, "gyro.csv:3", "expected 2 fields, found 3")
+
+
+def test_unknown_beacon(log_copy):
+    (log_copy / "ranges.csv").write_text("t,beacon,range\n0.1,Z,3.0\n")
+    expect_error(log_copy, "ranges.csv:2", "unknown beacon 'Z'")
+
+
+def test_malformed_toml(log_copy):
+    p = log_copy / "robot.toml"
+    p.write_text(p.read_text().replace("track_width = 0.6", "track_width = = 0.6"))
+    expect_error(log_copy, "robot.toml", "malformed TOML", "line 4")
+
+
+def test_invalid_robot_value(log_copy):
+    p = log_copy / "robot.toml"
+    p.write_text(p.read_text().replace("track_width = 0.6", "track_width = -0.6"))
+    expect_error(log_copy, "robot.toml", "[wheels.track_width] must be positive")
+
+
+def test_missing_robot_key(log_copy):
+    p = log_copy / "robot.toml"
+    p.write_text(p.read_text().replace("ticks_per_meter_left = 2000.0\n", ""))
+    expect_error(log_copy, "robot.toml", "[wheels.ticks_per_meter_left] is missing")
+
+
+def test_comments_and_extra_columns_are_allowed(log_copy):
+    p = log_copy / "gyro.csv"
+    lines = p.read_text().splitlines()
+    body = [lines[0] + ",temperature"] + [ln + ",21.5" for ln in lines[1:]]
+    p.write_text("# gyro from the IMU\n" + "\n".join(body[:5]) + "\n# a comment mid-file\n" + "\n".join(body[5:]) + "\n")
+    log = read_log(log_copy)
+    assert log.gyro.t.size == len(lines) - 1
+
+
+def test_latlon_gps_is_projected(tmp_path, paper_log):
+    # Write the GPS as lat/lon around Cleveland and read it back: local
+    # east/north from the first fix must match the original x/y offsets.
+    lat0, lon0 = 41.5045, -81.6086
+    g = paper_log.gps
+    # WGS84 meridional (M) and normal (N) radii of curvature at lat0.
+    a, e2, s2 = 6_378_137.0, 6.69437999014e-3, np.sin(np.radians(lat0)) ** 2
+    M, N = a * (1 - e2) / (1 - e2 * s2) ** 1.5, a / np.sqrt(1 - e2 * s2)
+    dlat = np.degrees(g.y / M)
+    dlon = np.degrees(g.x / (N * np.cos(np.radians(lat0))))
+    write_log(paper_log, tmp_path / "log")
+    rows = "\n".join(f"{t:.6f},{lat0 + a:.10f},{lon0 + b:.10f}" for t, a, b in zip(g.t, dlat, dlon))
+    (tmp_path / "log" / "gps.csv").write_text("t,lat,lon\n" + rows + "\n")
+    back = read_log(tmp_path / "log")
+    np.testing.assert_allclose(back.gps.x, g.x - g.x[0], atol=2e-3)
+    np.testing.assert_allclose(back.gps.y, g.y - g.y[0], atol=2e-3)
+
+
+def test_latlon_local_frame_is_metric():
+    # One thousandth of a degree of latitude is ~111 m north, no east.
+    e, n = latlon_to_local(45.001, 7.0, 45.0, 7.0)
+    assert abs(e) < 1e-6 and n == pytest.approx(111.1, abs=0.2)
+    e, n = latlon_to_local(0.0, 0.001, 0.0, 0.0)
+    assert e == pytest.approx(111.32, abs=0.01) and abs(n) < 1e-6
+
+
+def test_write_log_is_atomic(tmp_path, paper_log, monkeypatch):
+    import odomgraph.io.log as logmod
+    target = tmp_path / "out"
+
+    def boom(*a, **k):
+        raise RuntimeError("disk full")
+    monkeypatch.setattr(logmod, "write_table", boom)
+    with pytest.raises(RuntimeError):
+        write_log(paper_log, target)
+    assert not target.exists()
+    assert list(tmp_path.iterdir()) == []

@@ -1,0 +1,84 @@
+"""The simulator produces what the contract says: ticks consistent with the
+scale factors and slip definition, a lever-armed GPS, unsynchronised rates."""
+import numpy as np
+import pytest
+
+from factors.encoder import wheel_speeds
+from factors.gps import antenna_position
+from odomgraph.sim.scenarios import Rates, paper, yard
+from odomgraph.sim.simulate import simulate
+
+
+def test_deterministic_per_seed():
+    a, b, c = simulate(paper(30), 5), simulate(paper(30), 5), simulate(paper(30), 6)
+    np.testing.assert_array_equal(a.encoders.ticks_left, b.encoders.ticks_left)
+    assert not np.array_equal(a.gps.x, c.gps.x)
+
+
+@pytest.mark.parametrize("make", [paper, yard])
+def test_encoder_ticks_follow_the_error_model(make):
+    sc = make()
+    log = simulate(sc, 1)
+    e, r = log.encoders, sc.robot
+    dt = np.diff(e.t)
+    m = np.stack([e.ticks_left[1:] / (r.ticks_per_meter_left * dt), e.ticks_right[1:] / (r.ticks_per_meter_right * dt)], -1)
+    tm = 0.5 * (e.t[1:] + e.t[:-1])
+    tr = log.truth
+    pred, _ = wheel_speeds(tr.at("v", tm), tr.at("omega", tm), tr.at("slip_left", tm), tr.at("slip_right", tm),
+                           *sc.scales, r.track_width)
+    res = m - pred
+    # Unbiased, and as noisy as eq. 41 plus quantisation (interpolation adds a little at transitions).
+    assert np.abs(res.mean(0)).max() < 2e-3
+    a, b = r.encoder_sigma
+    q = 1 / (np.array([r.ticks_per_meter_left, r.ticks_per_meter_right]) * dt.mean())
+    expected = np.sqrt((a + b * np.abs(pred).mean(0)) ** 2 + q**2 / 6)
+    np.testing.assert_allclose(res.std(0), expected, rtol=0.25)
+
+
+def test_gps_has_the_lever_arm():
+    sc = paper()
+    log = simulate(sc, 2)
+    tr, g = log.truth, log.gps
+    h, _ = antenna_position(tr.at("x", g.t), tr.at("y", g.t), tr.at("theta", g.t), sc.robot.gps_lever_arm)
+    res = np.stack([g.x, g.y], -1) - h
+    assert np.abs(res.mean(0)).max() < 0.01
+    np.testing.assert_allclose(res.std(0), sc.robot.gps_sigma, rtol=0.1)
+    # ...and without the lever arm the residual would be biased by up to 0.45 m.
+    h0, _ = antenna_position(tr.at("x", g.t), tr.at("y", g.t), tr.at("theta", g.t), (0.0, 0.0))
+    assert np.abs(np.stack([g.x, g.y], -1) - h0).max() > 0.4
+
+
+def test_sensors_are_asynchronous_at_their_rates():
+    log = simulate(paper(), 0)
+    r = paper().rates
+    for sensor, rate in ((log.encoders, r.encoders), (log.gyro, r.gyro), (log.gps, r.gps)):
+        assert np.all(np.diff(sensor.t) > 0)
+        assert np.median(np.diff(sensor.t)) == pytest.approx(1 / rate, rel=0.02)
+    assert len(np.intersect1d(log.gps.t, log.encoders.t)) == 0
+
+
+def test_paper_scenario_has_the_papers_features():
+    sc = paper()
+    log = simulate(sc, 0)
+    tr = log.truth
+    assert sc.robot.gps_lever_arm == (-0.45, 0.0)
+    assert all(abs(s - 1) > 0.01 for s in sc.scales)
+    # each wheel slips 0.5 m/s at a different time, after calibration
+    for w in ("left", "right"):
+        s = tr.values[f"slip_{w}"]
+        assert s.max() == pytest.approx(0.5)
+        assert tr.t[np.argmax(s > 0.25)] > sc.calibrate_until
+    assert tr.t[np.argmax(tr.values["slip_left"] > 0.25)] != tr.t[np.argmax(tr.values["slip_right"] > 0.25)]
+    # a pivot (turning with no forward speed) early in the run
+    pivot = (np.abs(tr.values["v"]) < 0.05) & (np.abs(tr.values["omega"]) > 0.5)
+    assert pivot.any() and tr.t[pivot][0] < 10
+
+
+def test_optional_sensors_and_beacons():
+    from odomgraph.sim.scenarios import beacons_around
+    sc = paper(30).with_(rates=Rates(gps=0, gyro=0, ranges=10, velocity=5))
+    sc = sc.with_(robot=sc.robot.with_(beacons=beacons_around(0, 20, -10, 10)))
+    log = simulate(sc, 0)
+    assert log.gps is None and log.gyro is None
+    assert set(np.unique(log.ranges.beacon)) == {0, 1, 2}
+    assert log.velocity.t.size == pytest.approx(150, abs=2)
