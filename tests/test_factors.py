@@ -178,3 +178,27 @@ def test_range_at_the_beacon_is_finite():
     h, J = ranging.beacon_range(1.0, 2.0, 0.4, np.array([1.0, 2.0]))
     assert h[0] == 0.0
     assert np.all(np.isfinite(J)) and np.allclose(J[0, :3], 0.0)
+
+
+MODEL_CASES = [
+    (lambda a: encoder.wheel_speeds(*a, 0.6), 7),
+    (lambda a: gps.antenna_position(*a, (-0.45, 0.1)), 3),
+    (lambda a: gyro.yaw_rate(*a), 2),
+    (lambda a: ranging.beacon_range(a[0], a[1], a[2], np.array([3.0, -1.0]), (0.2, 0.0), a[3]), 4),
+    (lambda a: velocity.body_velocity(*a), 2),
+    (lambda a: pseudo.zero_slip(*a), 2),
+    (lambda a: pseudo.hold_scale(*a), 3),
+]
+
+
+@pytest.mark.parametrize("fun,n_args", MODEL_CASES)
+def test_every_model_broadcasts_and_matches_its_scalar_path(fun, n_args):
+    # The EKF uses the scalar fast paths, the smoother and Monte-Carlo the array
+    # paths: both must give identical numbers.
+    cols = [RNG.normal(1.0, 0.5, 40) for _ in range(n_args)]
+    H, J = fun(cols)
+    assert H.shape[0] == 40 and J.shape[0] == 40
+    for i in (0, 13, 39):
+        h1, j1 = fun([float(c[i]) for c in cols])
+        np.testing.assert_allclose(H[i], h1, rtol=1e-14, atol=1e-15)
+        np.testing.assert_allclose(J[i], j1, rtol=1e-14, atol=1e-15)

@@ -1,0 +1,127 @@
+"""The command line: files exactly as LOG_FORMAT.md says, clear one-line
+errors with exit code 1, and no half-written output."""
+import json
+
+import numpy as np
+import pytest
+from typer.testing import CliRunner
+
+from odomgraph import state as S
+from odomgraph.cli import app
+from tests.conftest import replace_line
+
+runner = CliRunner()
+
+STATE_COLUMNS = ["t", *S.NAMES, *(f"sigma_{n}" for n in S.NAMES)]
+
+
+def run(*args):
+    return runner.invoke(app, [str(a) for a in args])
+
+
+@pytest.fixture(scope="module")
+def estimated(tmp_path_factory, paper_log_dir):
+    out = tmp_path_factory.mktemp("est") / "ekf"
+    res = run("estimate", paper_log_dir, "--method", "ekf", "-o", out)
+    assert res.exit_code == 0, res.output
+    return out, res.output
+
+
+def test_estimate_writes_the_contract_files(estimated):
+    out, output = estimated
+    assert sorted(p.name for p in out.iterdir()) == ["states.csv", "summary.json", "trajectory.tum"]
+    header = (out / "states.csv").read_text().splitlines()[0]
+    assert header.split(",") == STATE_COLUMNS
+    data = np.loadtxt(out / "states.csv", delimiter=",", skiprows=1)
+    assert np.all(np.diff(data[:, 0]) > 0) and np.isfinite(data).all()
+    assert np.all(np.abs(data[:, 3]) <= np.pi)  # theta wrapped
+    tum = np.loadtxt(out / "trajectory.tum")
+    assert tum.shape == (data.shape[0], 8)
+    np.testing.assert_allclose(tum[:, 0], data[:, 0], atol=1e-6)
+    np.testing.assert_allclose(tum[:, 1:3], data[:, 1:3], atol=1e-6)
+    np.testing.assert_array_equal(tum[:, 3:6], 0.0)
+    np.testing.assert_allclose(tum[:, 6], np.sin(data[:, 3] / 2), atol=1e-8)
+    np.testing.assert_allclose(tum[:, 7], np.cos(data[:, 3] / 2), atol=1e-8)
+    s = json.loads((out / "summary.json").read_text())
+    assert s["method"] == "ekf" and s["n_steps"] == data.shape[0] and s["wall_time_s"] > 0
+    for k in ("scale_left", "scale_right", "scale_track"):
+        assert set(s["calibration"][k]) == {"value", "sigma"}
+    e = s["errors"]
+    assert e["rms_position_m"] < 0.05
+    assert set(e["rms_slip_mps"]) == {"left", "right"} and set(e["final_scale_error"]) == {"left", "right", "track"}
+    # the final row of states.csv is the calibration
+    assert s["calibration"]["scale_track"]["value"] == pytest.approx(data[-1, 11], rel=1e-8)
+    assert "scale_left" in output and "updates/s" in output
+
+
+def test_simulate_options(tmp_path):
+    out = tmp_path / "log"
+    res = run("simulate", "--scenario", "yard", "--seed", "3", "--duration", "30", "--gps-hz", "5",
+              "--gyro-hz", "0", "--range-hz", "4", "--scales", "1.01,0.99,1.02",
+              "--slip", "left:10:12:0.3", "--initial", "-o", out)
+    assert res.exit_code == 0, res.output
+    names = sorted(p.name for p in out.iterdir())
+    assert names == ["encoders.csv", "gps.csv", "ranges.csv", "robot.toml", "truth.csv", "truth.toml"]
+    assert "scale_left = 1.01" in (out / "truth.toml").read_text()
+    assert "[initial]" in (out / "robot.toml").read_text()
+    t = np.loadtxt(out / "gps.csv", delimiter=",", skiprows=1)[:, 0]
+    assert np.median(np.diff(t)) == pytest.approx(0.2, rel=0.05)
+    truth = np.genfromtxt(out / "truth.csv", delimiter=",", names=True)
+    assert truth["slip_left"].max() == pytest.approx(0.3) and truth["slip_right"].max() == 0.0
+
+
+def one_line_error(res, *fragments):
+    assert res.exit_code == 1, res.output
+    err = res.stderr.strip()
+    assert err.count("\n") == 0 and err.startswith("odomgraph: error:"), err
+    assert "Traceback" not in res.output
+    for f in fragments:
+        assert f in err, err
+
+
+def test_bad_log_is_one_line_and_writes_nothing(log_copy, tmp_path):
+    p = log_copy / "gps.csv"
+    t = p.read_text().splitlines()[7].split(",")[0]
+    replace_line(p, 8, f"{t},inf,2.0")
+    out = tmp_path / "out"
+    one_line_error(run("estimate", log_copy, "-o", out), "gps.csv:8", "not a finite number")
+    assert not out.exists()
+
+
+def test_missing_log_dir(tmp_path):
+    one_line_error(run("estimate", tmp_path / "nope", "-o", tmp_path / "o"), "does not exist")
+
+
+def test_bad_options(paper_log_dir, tmp_path):
+    one_line_error(run("estimate", paper_log_dir, "--calibrate-until", "none", "-o", tmp_path / "o"), "smoother")
+    one_line_error(run("estimate", paper_log_dir, "--calibrate-until", "soon", "-o", tmp_path / "o"), "soon")
+    one_line_error(run("simulate", "--scales", "1,2", "-o", tmp_path / "s"), "--scales", "3 comma-separated")
+    one_line_error(run("simulate", "--slip", "middle:1:2:3", "-o", tmp_path / "s"), "--slip")
+
+
+def test_refuses_to_overwrite_a_foreign_directory(paper_log_dir, tmp_path):
+    foreign = tmp_path / "thesis"
+    foreign.mkdir()
+    (foreign / "chapter1.tex").write_text("precious")
+    one_line_error(run("estimate", paper_log_dir, "-o", foreign), "not written by odomgraph")
+    assert (foreign / "chapter1.tex").read_text() == "precious"
+
+
+def test_diverged_filter_is_an_error_not_nan(log_copy, tmp_path):
+    # swap GPS x and y: the mirror image of the path (see test_ekf)
+    p = log_copy / "gps.csv"
+    lines = p.read_text().splitlines()
+    p.write_text("t,y,x\n" + "\n".join(lines[1:]) + "\n")
+    out = tmp_path / "out"
+    one_line_error(run("estimate", log_copy, "-o", out), "EKF diverged at t=")
+    assert not out.exists()
+
+
+def test_help_texts():
+    res = run("--help")
+    assert res.exit_code == 0
+    for cmd in ("simulate", "estimate", "demo"):
+        assert cmd in res.output
+        sub = run(cmd, "--help")
+        assert sub.exit_code == 0 and "Usage" in sub.output
+    assert "--calibrate-until" in run("estimate", "--help").output
