@@ -70,3 +70,45 @@ def propagate(x, y, theta, v, omega, dt):
     J[..., 1, 4] = k * (ds * sn + s * c)
     J[..., 2, 4] = dt
     return pose, J
+
+
+def transition_residual(x, y, theta, v, omega, dt, x1, y1, theta1):
+    """Residual of the next pose against the motion model, in the predicted body frame.
+
+    e = [R(theta_p)^T (p1 - p_p), wrap(theta1 - theta_p)] with (p_p, theta_p) =
+    propagate(x, y, theta, v, omega, dt): the along-track, lateral [m] and
+    heading [rad] disagreement of pose 1 with the arc flown from pose 0.
+
+    Returns:
+        e: (..., 3).
+        J0: (..., 3, 5) d e / d (x, y, theta, v, omega) of the first pose and velocity.
+        J1: (..., 3, 3) d e / d (x1, y1, theta1), world-frame coordinates.
+    """
+    from factors._math import wrap_angle
+    pred, Jf = propagate(x, y, theta, v, omega, dt)
+    shape = pred.shape[:-1]
+    tp = pred[..., 2]
+    c, s = np.cos(tp), np.sin(tp)
+    dx = np.asarray(x1, dtype=float) - pred[..., 0]
+    dy = np.asarray(y1, dtype=float) - pred[..., 1]
+    e = np.empty(shape + (3,))
+    e[..., 0] = c * dx + s * dy
+    e[..., 1] = -s * dx + c * dy
+    e[..., 2] = wrap_angle(np.asarray(theta1, dtype=float) - tp)
+    # d e_p / d pred = -R^T on the position, plus the rotation of R^T by theta_p.
+    de_dpred = np.zeros(shape + (3, 3))
+    de_dpred[..., 0, 0] = -c
+    de_dpred[..., 0, 1] = -s
+    de_dpred[..., 1, 0] = s
+    de_dpred[..., 1, 1] = -c
+    de_dpred[..., 0, 2] = -s * dx + c * dy
+    de_dpred[..., 1, 2] = -c * dx - s * dy
+    de_dpred[..., 2, 2] = -1.0
+    J0 = de_dpred @ Jf
+    J1 = np.zeros(shape + (3, 3))
+    J1[..., 0, 0] = c
+    J1[..., 0, 1] = s
+    J1[..., 1, 0] = -s
+    J1[..., 1, 1] = c
+    J1[..., 2, 2] = 1.0
+    return e, J0, J1

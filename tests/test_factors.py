@@ -202,3 +202,42 @@ def test_every_model_broadcasts_and_matches_its_scalar_path(fun, n_args):
         h1, j1 = fun([float(c[i]) for c in cols])
         np.testing.assert_allclose(H[i], h1, rtol=1e-14, atol=1e-15)
         np.testing.assert_allclose(J[i], j1, rtol=1e-14, atol=1e-15)
+
+
+@pytest.mark.parametrize("s", random_states(10) + EDGE)
+@pytest.mark.parametrize("dt", [0.05, 0.4])
+def test_transition_residual_jacobians(s, dt):
+    x1 = [s["x"] + 0.3, s["y"] - 0.2, s["theta"] + 0.1]
+    args0 = [s[k] for k in motion.INPUTS]
+    e, J0, J1 = motion.transition_residual(*args0, dt, *x1)
+    f0 = lambda *a: (motion.transition_residual(*a, dt, *x1)[0],)
+    f1 = lambda *a: (motion.transition_residual(*args0, dt, *a)[0],)
+    np.testing.assert_allclose(J0, numeric_jacobian(f0, args0, 3), atol=1e-6)
+    np.testing.assert_allclose(J1, numeric_jacobian(f1, x1, 3), atol=1e-6)
+    # exactly on the arc, the residual is zero
+    p, _ = motion.propagate(*args0, dt)
+    e0, _, _ = motion.transition_residual(*args0, dt, *p)
+    np.testing.assert_allclose(e0, 0.0, atol=1e-12)
+
+
+def test_pose2_retract_and_body_jacobian_match_gtsam():
+    import gtsam
+    from factors import pose2
+    for _ in range(20):
+        x, y, th = RNG.normal(0, 5), RNG.normal(0, 5), RNG.uniform(-np.pi, np.pi)
+        d = RNG.normal(0, 0.3, 3)
+        ref = gtsam.Pose2(x, y, th).retract(d)
+        got = pose2.retract(x, y, th, d)
+        np.testing.assert_allclose([got[0], got[1], np.angle(np.exp(1j * got[2]))],
+                                   [ref.x(), ref.y(), ref.theta()], atol=1e-12)
+    # body Jacobian of the GPS model against a numerical derivative through gtsam's retract
+    x, y, th, lever = 2.0, -1.0, 2.5, (-0.45, 0.2)
+    _, Jw = gps.antenna_position(x, y, th, lever)
+    Jb = pose2.to_body(Jw, th)
+    num = np.zeros((2, 3))
+    for k in range(3):
+        d = np.zeros(3); d[k] = 1e-6
+        hp = gtsam.Pose2(x, y, th).retract(d); hm = gtsam.Pose2(x, y, th).retract(-d)
+        num[:, k] = (gps.antenna_position(hp.x(), hp.y(), hp.theta(), lever)[0]
+                     - gps.antenna_position(hm.x(), hm.y(), hm.theta(), lever)[0]) / 2e-6
+    np.testing.assert_allclose(Jb, num, atol=1e-7)

@@ -1,0 +1,252 @@
+"""Batch smoother: Levenberg-Marquardt over the whole log, on GTSAM's elimination.
+
+Why not GTSAM's own LevenbergMarquardtOptimizer with CustomFactors: inside
+GTSAM's optimisers every Python callback receives a copy of the whole Values,
+so one iteration costs O(n^2) (ESTIMATION-NOTES.md; benchmarks/README.md
+measures it as the "straightforward" peer). Here every factor is linearised
+for all keyframes at once in numpy (graph.py, the EKF's models), the rows of
+each keyframe interval become one gtsam.JacobianFactor on (k, k+1), and GTSAM
+eliminates the chain in time order (linear in the log length; COLAMD was
+1.6x slower on this structure). Marginals come from the eliminated Bayes net
+by the backward recursion
+    Sigma_k = R_k^-1 R_k^-T + (R_k^-1 S_k) Sigma_{k+1} (R_k^-1 S_k)^T,
+also linear, where GTSAM's Marginals would query the Bayes tree key by key.
+"""
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+
+import gtsam
+import numpy as np
+
+from factors import pose2
+from factors._math import wrap_angle
+from factors.motion import propagate
+from odomgraph import state as S
+from odomgraph.errors import EstimatorDivergedError
+from odomgraph.estimators.graph import NB, Linearization, Problem, linearize
+from odomgraph.estimators.initial import initial_state
+from odomgraph.estimators.keyframes import build_keyframes
+from odomgraph.estimators.measurements import from_log
+from odomgraph.estimators.result import Estimate
+from odomgraph.estimators.schedule import Schedule
+from odomgraph.io.log import Log
+
+
+@dataclass(frozen=True)
+class SmootherOptions:
+    keyframe_hz: float = 5.0
+    """Keyframe rate [Hz] (at most the encoder rate); slip is resolved at this rate."""
+    max_iterations: int = 50
+    rel_tol: float = 1e-7
+    """Stop when the cost decreases by less than this fraction."""
+    slip_cauchy: float | None = 0.01
+    """Cauchy scale [m/s] of the sparse zero-slip prior outside the calibration
+    window (the whole log with ``calibrate_until=None``). None: no prior there,
+    slip is a free random walk after the window as in the EKF."""
+
+
+def slip_noise(robot, meas) -> np.ndarray:
+    """(2, 2) slip intensity in (left, right), as the EKF uses it."""
+    pn = robot.process
+    q_d = pn.slip_differential
+    if q_d is None:
+        q_d = 1.0 if (meas.gyro is not None or meas.velocity is not None) else 0.02
+    return pn.slip**2 * np.ones((2, 2)) + 0.25 * q_d**2 * np.array([[1.0, -1.0], [-1.0, 1.0]])
+
+
+def build_problem(log: Log, schedule: Schedule, options: SmootherOptions) -> Problem:
+    """The keyframe graph of a log: same initialisation and schedule as the EKF."""
+    meas = from_log(log)
+    init = initial_state(log.robot, meas)
+    kf = build_keyframes(log, init.t, options.keyframe_hz)
+    if kf.n < 3:
+        raise EstimatorDivergedError("the log is too short for the smoother: fewer than 3 keyframes")
+    # Move the initial state to the first keyframe (a fraction of an encoder period).
+    mean = init.x.copy()
+    p, _ = propagate(mean[0], mean[1], mean[2], mean[3], mean[4], kf.t[0] - init.t)
+    mean[0:3] = p
+    cov = init.P.copy()
+    mid = 0.5 * (kf.t[1:] + kf.t[:-1])
+    if schedule.calibrate_until is None:
+        zero = np.zeros(kf.n - 1, bool)
+    else:
+        zero = mid < meas.t_start + schedule.calibrate_until
+    robust = options.slip_cauchy
+    return Problem(kf, log.robot, mean, cov, zero, robust, slip_noise(log.robot, meas))
+
+
+def initial_guess(prob: Problem, ekf: Estimate) -> tuple[np.ndarray, np.ndarray]:
+    """Keyframe estimate from a filter run: poses at t_k, interval averages of the rest.
+
+    Starting from dead reckoning with wrong scale factors, batch solves can
+    fall into a wrong minimum (ESTIMATION-NOTES.md); the filter starts them
+    near the answer.
+    """
+    t = prob.kf.t
+    m = ekf.mean
+    pose = np.stack([np.interp(t, ekf.t, m[:, S.X]), np.interp(t, ekf.t, m[:, S.Y]),
+                     wrap_angle(np.interp(t, ekf.t, np.unwrap(m[:, S.THETA])))], -1)
+    W = np.empty((len(t), 8))
+    mid = np.append(0.5 * (t[1:] + t[:-1]), t[-1])
+    for j, i in enumerate(range(S.V, S.N)):
+        W[:, j] = np.interp(mid, ekf.t, m[:, i])
+    W[:, 5:8] = m[-1, S.SCALE]
+    return pose, W
+
+
+def _factor_arrays(prob: Problem, lin: Linearization):
+    """Stack each interval's rows: A1 on block k, A2 on block k+1, b."""
+    n1 = prob.kf.n - 1
+    ru = lin.A_u.shape[1]
+    rows = ru + 3 + 8
+    A1 = np.zeros((n1, rows, NB))
+    A2 = np.zeros((n1, rows, NB))
+    b = np.empty((n1, rows))
+    A1[:, :ru] = lin.A_u
+    A1[:, ru:ru + 3] = lin.A_m0
+    A2[:, ru:ru + 3, 0:3] = lin.A_m1
+    A1[:, ru + 3:, 3:] = -lin.A_w
+    A2[:, ru + 3:, 3:] = lin.A_w
+    b[:, :ru] = lin.b_u
+    b[:, ru:ru + 3] = lin.b_m
+    b[:, ru + 3:] = lin.b_w
+    return A1, A2, b
+
+
+def gaussian_graph(prob: Problem, lin: Linearization) -> gtsam.GaussianFactorGraph:
+    """The linearised problem as a GTSAM graph: one JacobianFactor per interval on (k, k+1)."""
+    A1, A2, b = _factor_arrays(prob, lin)
+    g = gtsam.GaussianFactorGraph()
+    g.add(gtsam.JacobianFactor(0, lin.A_p, lin.b_p, gtsam.noiseModel.Unit.Create(NB)))
+    unit = gtsam.noiseModel.Unit.Create(A1.shape[1])
+    for k in range(prob.kf.n - 1):
+        g.add(gtsam.JacobianFactor(k, A1[k], k + 1, A2[k], b[k], unit))
+    return g
+
+
+def time_ordering(n: int) -> gtsam.Ordering:
+    """Keyframes in time order: the chain eliminates with no fill."""
+    o = gtsam.Ordering()
+    for k in range(n):
+        o.push_back(k)
+    return o
+
+
+def retract(pose: np.ndarray, W: np.ndarray, d: np.ndarray):
+    x, y, th = pose2.retract(pose[:, 0], pose[:, 1], pose[:, 2], d[:, 0:3])
+    return np.stack([x, y, wrap_angle(th)], -1), W + d[:, 3:]
+
+
+def solve(prob: Problem, pose: np.ndarray, W: np.ndarray, options: SmootherOptions, progress=None):
+    """Gauss-Newton with a backtracking line search. Returns (pose, W, iterations, cost).
+
+    Not Levenberg-Marquardt with Marquardt damping: the scale factors are
+    per-keyframe copies tied by very tight random-walk factors, so diag(A^T A)
+    is ~1e10 on their columns and Marquardt damping freezes exactly the
+    direction that calibration has to move (measured: LM stopped 1 sigma short
+    in a flat valley). Started near the answer (from the EKF), full
+    Gauss-Newton steps with step halving converge in a few iterations.
+    """
+    n = prob.kf.n
+    order = time_ordering(n)
+    lin = linearize(prob, pose, W)
+    it = 0
+    for it in range(1, options.max_iterations + 1):
+        if progress is not None:
+            progress(it, options.max_iterations)
+        vv = gaussian_graph(prob, lin).optimize(order, gtsam.EliminateQR)
+        d = np.stack([vv.at(k) for k in range(n)])
+        if not np.all(np.isfinite(d)):
+            raise EstimatorDivergedError(f"batch smoother diverged at iteration {it}: non-finite step")
+        alpha = 1.0
+        while True:
+            pose_n, W_n = retract(pose, W, alpha * d)
+            lin_n = linearize(prob, pose_n, W_n)
+            if lin_n.cost <= lin.cost or alpha < 1e-3:
+                break
+            alpha *= 0.5
+        if lin_n.cost > lin.cost:
+            break  # no descent left along the Gauss-Newton direction: converged
+        decrease = (lin.cost - lin_n.cost) / max(lin.cost, 1e-300)
+        pose, W, lin = pose_n, W_n, lin_n
+        if decrease < options.rel_tol:
+            break
+    return pose, W, it, lin.cost
+
+
+def marginal_blocks(prob: Problem, pose: np.ndarray, W: np.ndarray) -> np.ndarray:
+    """(N, 11, 11) marginal covariance of each keyframe block (pose part in the body frame)."""
+    lin = linearize(prob, pose, W)
+    g = gaussian_graph(prob, lin)
+    n = prob.kf.n
+    bn = g.eliminateSequential(time_ordering(n), gtsam.EliminateQR)
+    Sig = np.empty((n, NB, NB))
+    c = bn.at(n - 1)
+    Rinv = np.linalg.inv(c.R())
+    Sig[n - 1] = Rinv @ Rinv.T
+    for k in range(n - 2, -1, -1):
+        c = bn.at(k)
+        Rinv = np.linalg.inv(c.R())
+        A = Rinv @ c.S()
+        Sig[k] = Rinv @ Rinv.T + A @ Sig[k + 1] @ A.T
+    return Sig
+
+
+def keyframe_rows(prob: Problem, pose: np.ndarray, W: np.ndarray, Sig: np.ndarray | None, method: str,
+                  rows: slice = slice(None)) -> Estimate:
+    """States at interval midpoints: the pose flown half an interval from X_k, W_k's averages.
+
+    Row k describes interval k, so its velocity, slip and bias are the averages
+    they are estimated as; sigma is propagated through the same arc.
+    """
+    kf = prob.kf
+    k = np.arange(kf.n - 1)[rows]
+    half = 0.5 * kf.dt[k]
+    t = kf.t[k] + half
+    p, Jf = propagate(pose[k, 0], pose[k, 1], pose[k, 2], W[k, 0], W[k, 1], half)
+    mean = np.empty((len(k), S.N))
+    mean[:, 0:2] = p[:, 0:2]
+    mean[:, 2] = wrap_angle(p[:, 2])
+    mean[:, 3:] = W[k]
+    sigma = np.zeros((len(k), S.N))
+    pose_cov = None
+    if Sig is not None:
+        # d pose_mid / d block: body-frame pose columns and (v, omega).
+        J = np.zeros((len(k), 3, NB))
+        J[:, :, 0:3] = pose2.to_body(Jf[:, :, 0:3], pose[k, 2])
+        J[:, :, 3:5] = Jf[:, :, 3:5]
+        pose_cov = J @ Sig[k] @ np.swapaxes(J, 1, 2)
+        sigma[:, 0:3] = np.sqrt(np.maximum(np.diagonal(pose_cov, 0, 1, 2), 0))
+        sigma[:, 3:] = np.sqrt(np.maximum(np.diagonal(Sig[k], 0, 1, 2)[:, 3:], 0))
+    return Estimate(method=method, t=t, mean=mean, sigma=sigma, pose_cov=pose_cov)
+
+
+def run_batch(log: Log, schedule: Schedule = Schedule(), options: SmootherOptions = SmootherOptions(),
+              progress=None) -> Estimate:
+    """Smooth the whole log. Starts from the EKF (same schedule; 20 s when there is none)."""
+    from odomgraph.estimators.ekf import run_ekf
+    wall0 = time.perf_counter()
+    prob = build_problem(log, schedule, options)
+    ekf_schedule = schedule if schedule.calibrate_until is not None else Schedule(20.0)
+    ekf = run_ekf(log, ekf_schedule)
+    pose, W = initial_guess(prob, ekf)
+    pose, W, iters, cost = solve(prob, pose, W, options, progress)
+    if not (np.all(np.isfinite(pose)) and np.all(np.isfinite(W))):
+        raise EstimatorDivergedError("batch smoother diverged: non-finite estimate")
+    Sig = marginal_blocks(prob, pose, W)
+    est = keyframe_rows(prob, pose, W, Sig, "batch")
+    est.wall_time_s = time.perf_counter() - wall0
+    est.n_updates = _n_measurements(prob)
+    t0 = from_log(log).t_start
+    est.t_switch = None if schedule.calibrate_until is None else t0 + schedule.calibrate_until
+    est.calibration_sigma = np.sqrt(np.diagonal(Sig[-1])[8:11])
+    est.notes = [f"batch: {prob.kf.n} keyframes at {options.keyframe_hz:g} Hz, {iters} LM iterations, "
+                 f"final cost {cost:.1f}"] + list(ekf.notes)
+    return est
+
+
+def _n_measurements(prob: Problem) -> int:
+    kf = prob.kf
+    return int(kf.n - 1 + np.sum(kf.gyro_n) + np.sum(kf.vel_n) + kf.gps_k.size + kf.rng_k.size)

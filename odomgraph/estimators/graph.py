@@ -1,0 +1,233 @@
+"""The smoother's factor graph, linearised for all keyframes at once.
+
+Variables per keyframe k (see keyframes.py): the pose X_k (Pose2, body-frame
+tangent) and W_k (8 averages). Their 11-dim tangent block is ordered like
+``state.NAMES``: [dX (body), dv, domega, dbias, dslip_l, dslip_r, dscale_l, dscale_r, dscale_track].
+
+Factors, all built on the models in ``factors/`` (the EKF's models):
+
+* motion (X_k, W_k, X_{k+1}): X_{k+1} against the arc flown with W_k's average
+  velocity (factors.motion.transition_residual);
+* random walk (W_k, W_{k+1}): of v, omega (white acceleration), gyro bias,
+  common-mode and differential slip (as in the EKF) and the scale factors (a
+  floor of 1e-5/sqrt(s) keeps the chain free of global variables);
+* unary on (X_k, W_k): encoder (eq. 29), gyro (eq. 10), velocity sensor,
+  GPS (eq. 8) and range (eq. 12) at tau after t_k via the arc, and the
+  schedule's zero-slip prior (eq. 35);
+* a prior on keyframe 0 from the initialisation.
+
+``linearize`` returns whitened Jacobians (A) and right-hand sides (b = -r),
+so that the Gauss-Newton step minimises ||A d - b||^2.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from factors import encoder, gps as gps_model, gyro, pose2, ranging
+from factors.motion import propagate, transition_residual
+from odomgraph.estimators.keyframes import Keyframes
+from odomgraph.io.robot import RobotConfig
+
+NB = 11  # tangent dimension of a keyframe block
+# W columns inside a block
+V, OM, B, SL, SR, KL, KR, KB = range(3, 11)
+_ENC_COLS = [V, OM, SL, SR, KL, KR, KB]
+SCALE_FLOOR = 1e-5  # scale-factor random walk floor [1/sqrt(s)]
+
+
+@dataclass
+class Problem:
+    """Everything fixed while the estimate changes."""
+    kf: Keyframes
+    robot: RobotConfig
+    prior_mean: np.ndarray
+    """(11,) world-frame state of keyframe 0 (state.NAMES order)."""
+    prior_cov: np.ndarray
+    """(11, 11) its covariance (pose block in the world frame)."""
+    zero_slip: np.ndarray
+    """(N-1,) intervals forced to zero slip (the schedule's calibration window)."""
+    slip_robust: float | None = None
+    """Cauchy scale [m/s] of a sparse zero-slip prior on the other intervals (None: none)."""
+    q_slip: np.ndarray | None = None
+    """(2, 2) slip intensity matrix (common-mode / differential), as in the EKF."""
+
+    def __post_init__(self):
+        kf = self.kf
+        # Fixed row layout of the unary factor of each interval.
+        self.g_max = int(np.bincount(kf.gps_k, minlength=kf.n - 1).max()) if kf.gps_k.size else 0
+        self.r_max = int(np.bincount(kf.rng_k, minlength=kf.n - 1).max()) if kf.rng_k.size else 0
+        self.rows_unary = 2 + 1 + 2 + 2 + 2 * self.g_max + self.r_max
+        self.gps_slot = _slots(kf.gps_k)
+        self.rng_slot = _slots(kf.rng_k)
+        self._rw_whiten = self._random_walk_whiteners()
+
+    def _random_walk_whiteners(self) -> np.ndarray:
+        """(N-1, 8, 8) inverse Cholesky factors of each W random-walk step covariance.
+
+        The difference of two adjacent interval averages of a random walk of
+        intensity q has variance q (dt_k + dt_{k+1}) / 3.
+        """
+        pn, dt = self.robot.process, self.kf.dt
+        span = (dt + np.append(dt[1:], dt[-1])) / 3.0
+        Q = np.zeros((len(dt), 8, 8))
+        Q[:, 0, 0] = pn.accel**2 * span
+        Q[:, 1, 1] = pn.yaw_accel**2 * span
+        Q[:, 2, 2] = pn.gyro_bias**2 * span
+        Q[:, 3:5, 3:5] = self.q_slip[None] * span[:, None, None]
+        qs = max(pn.scale, SCALE_FLOOR) ** 2
+        for i in (5, 6, 7):
+            Q[:, i, i] = qs * span
+        L = np.linalg.cholesky(Q)
+        return np.linalg.inv(L)
+
+
+def _slots(k: np.ndarray) -> np.ndarray:
+    """Rank of each measurement among those of its interval (k sorted)."""
+    if k.size == 0:
+        return k
+    first = np.searchsorted(k, k, side="left")
+    return np.arange(k.size) - first
+
+
+@dataclass
+class Linearization:
+    A_u: np.ndarray
+    """(N-1, Ru, 11) unary rows on block k."""
+    b_u: np.ndarray
+    A_m0: np.ndarray
+    """(N-1, 3, 11) motion rows on block k."""
+    A_m1: np.ndarray
+    """(N-1, 3, 3) motion rows on the pose of block k+1."""
+    b_m: np.ndarray
+    A_w: np.ndarray
+    """(N-1, 8, 8) random-walk whitener: rows are A_w (dW_{k+1} - dW_k) = b_w."""
+    b_w: np.ndarray
+    A_p: np.ndarray
+    """(11, 11) prior rows on block 0."""
+    b_p: np.ndarray
+    cost: float
+    """0.5 * sum of squared whitened residuals (robust-weighted where robust)."""
+
+
+def linearize(prob: Problem, pose: np.ndarray, W: np.ndarray, jacobians: bool = True) -> Linearization:
+    """Whitened linearisation at the estimate (pose (N, 3) world, W (N, 8))."""
+    kf, r, pn = prob.kf, prob.robot, prob.robot.process
+    n1 = kf.n - 1
+    x, y, th = pose[:-1, 0], pose[:-1, 1], pose[:-1, 2]
+    w = W[:-1]
+    A_u = np.zeros((n1, prob.rows_unary, NB))
+    b_u = np.zeros((n1, prob.rows_unary))
+    robust_cost = 0.0
+
+    # --- encoder over each interval (eq. 29-34), exact for the averages.
+    h, J = encoder.wheel_speeds(w[:, 0], w[:, 1], w[:, 3], w[:, 4], w[:, 5], w[:, 6], w[:, 7], r.track_width)
+    inv = 1.0 / kf.enc_sigma
+    b_u[:, 0:2] = -(h - kf.enc_m) * inv
+    A_u[:, 0:2][:, :, _ENC_COLS] = J * inv[:, :, None]
+    # --- gyro average (eq. 10-11): sample noise / n plus the spread of omega inside the interval.
+    has = kf.gyro_n > 0
+    if has.any():
+        sg = np.sqrt(r.gyro_sigma**2 / np.maximum(kf.gyro_n, 1) + pn.yaw_accel**2 * kf.dt / (6 * np.maximum(kf.gyro_n, 1)))
+        h, J = gyro.yaw_rate(w[:, 1], w[:, 2])
+        s = np.where(has, 1.0 / sg, 0.0)
+        b_u[:, 2] = -(h[:, 0] - kf.gyro_z) * s
+        A_u[:, 2, OM] = J[:, 0, 0] * s
+        A_u[:, 2, B] = J[:, 0, 1] * s
+    # --- velocity sensor average (sec. VI-B).
+    has = kf.vel_n > 0
+    if has.any():
+        sv = np.asarray(r.velocity_sigma)[None, :] / np.sqrt(np.maximum(kf.vel_n, 1))[:, None]
+        s = np.where(has[:, None], 1.0 / sv, 0.0)
+        b_u[:, 3:5] = -(w[:, 0:2] - kf.vel_z) * s
+        A_u[:, 3, V] = s[:, 0]
+        A_u[:, 4, OM] = s[:, 1]
+    # --- slip: the schedule's zero-slip pseudo-prior (eq. 35-36) inside the
+    # calibration window; outside it, optionally a sparse (Cauchy) zero prior.
+    s_fixed = np.where(prob.zero_slip, 1.0 / pn.pseudo_slip_sigma, 0.0)[:, None] * np.ones(2)
+    sw = s_fixed
+    if prob.slip_robust is not None:
+        c = prob.slip_robust
+        s2 = w[:, 3:5] ** 2
+        free = ~prob.zero_slip
+        robust_cost = float(np.sum((0.5 * c**2 * np.log1p(s2 / c**2))[free]))
+        # IRLS: a Cauchy loss acts as a Gaussian of weight 1 / (1 + (s/c)^2) at the current s.
+        sw = np.where(free[:, None], np.sqrt(1.0 / (1.0 + s2 / c**2)) / c, s_fixed)
+    b_u[:, 5:7] = -w[:, 3:5] * sw
+    A_u[:, 5, SL] = sw[:, 0]
+    A_u[:, 6, SR] = sw[:, 1]
+    # --- GPS fixes (eq. 8-9) at tau after t_k, on the arc flown from X_k.
+    if kf.gps_k.size:
+        k = kf.gps_k
+        p, Jf = propagate(x[k], y[k], th[k], w[k, 0], w[k, 1], kf.gps_tau)
+        h, Jh = gps_model.antenna_position(p[:, 0], p[:, 1], p[:, 2], r.gps_lever_arm)
+        Jt = Jh @ Jf                                              # (G, 2, 5) world (x, y, theta, v, omega)
+        inv = (1.0 / kf.gps_sigma)[:, None]
+        rows = 7 + 2 * prob.gps_slot
+        for j in range(2):
+            b_u[k, rows + j] = -(h[:, j] - kf.gps_xy[:, j]) * inv[:, 0]
+            A_u[k, rows + j, 0:3] = pose2.to_body(Jt[:, j:j + 1, 0:3], th[k])[:, 0] * inv
+            A_u[k, rows + j, V] = Jt[:, j, 3] * inv[:, 0]
+            A_u[k, rows + j, OM] = Jt[:, j, 4] * inv[:, 0]
+    # --- ranges (eq. 12-16), likewise.
+    if kf.rng_k.size:
+        k = kf.rng_k
+        p, Jf = propagate(x[k], y[k], th[k], w[k, 0], w[k, 1], kf.rng_tau)
+        h, Jh = ranging.beacon_range(p[:, 0], p[:, 1], p[:, 2], kf.rng_beacon, r.range_lever_arm)
+        Jt = Jh[:, :, :3] @ Jf
+        inv = 1.0 / r.range_sigma
+        rows = 7 + 2 * prob.g_max + prob.rng_slot
+        b_u[k, rows] = -(h[:, 0] - kf.rng_z) * inv
+        A_u[k, rows, 0:3] = pose2.to_body(Jt[:, :, 0:3], th[k])[:, 0] * inv
+        A_u[k, rows, V] = Jt[:, 0, 3] * inv
+        A_u[k, rows, OM] = Jt[:, 0, 4] * inv
+
+    # --- motion: X_{k+1} against the arc of W_k's average velocity.
+    e, J0, J1 = transition_residual(x, y, th, w[:, 0], w[:, 1], kf.dt, pose[1:, 0], pose[1:, 1], pose[1:, 2])
+    sm = 1.0 / motion_sigma(prob, w)
+    b_m = -e * sm
+    A_m0 = np.zeros((n1, 3, NB))
+    A_m0[:, :, 0:3] = pose2.to_body(J0[:, :, 0:3], th) * sm[:, :, None]
+    A_m0[:, :, V] = J0[:, :, 3] * sm
+    A_m0[:, :, OM] = J0[:, :, 4] * sm
+    A_m1 = pose2.to_body(J1, pose[1:, 2]) * sm[:, :, None]
+
+    # --- random walk of W (linear).
+    dW = W[1:] - W[:-1]
+    b_w = -np.einsum("kij,kj->ki", prob._rw_whiten, dW)
+
+    # --- prior on keyframe 0 (world-frame covariance mapped to the body tangent).
+    d0 = np.concatenate([[pose[0, 0], pose[0, 1], pose[0, 2]], W[0]]) - prob.prior_mean
+    d0[2] = np.angle(np.exp(1j * d0[2]))
+    Lp = np.linalg.inv(np.linalg.cholesky(prob.prior_cov))
+    M = np.eye(NB)
+    c0, s0 = np.cos(pose[0, 2]), np.sin(pose[0, 2])
+    M[0:2, 0:2] = [[c0, -s0], [s0, c0]]                      # d world / d body
+    A_p = Lp @ M
+    b_p = -Lp @ d0
+
+    cost = 0.5 * (np.sum(b_u**2) + np.sum(b_m**2) + np.sum(b_w**2) + np.sum(b_p**2))
+    if prob.slip_robust is not None:
+        # the IRLS rows above carry the weighted square; count the true Cauchy cost instead
+        free = ~prob.zero_slip
+        cost += robust_cost - 0.5 * np.sum(b_u[free, 5:7] ** 2)
+    return Linearization(A_u, b_u, A_m0, A_m1, b_m, prob._rw_whiten, b_w, A_p, b_p, float(cost))
+
+
+def motion_sigma(prob: Problem, w: np.ndarray) -> np.ndarray:
+    """(N-1, 3) 1-sigma of the motion residual (along-track, lateral [m], heading [rad]).
+
+    With W_k the exact interval average, the arc is exact for a constant
+    yaw rate; what remains is the yaw rate varying inside the interval, which
+    bends the path sideways by about |v| dt * sqrt(q_omega dt / 12), plus
+    a 1 mm / 0.1 mrad floor for everything second order.
+    """
+    dt = prob.kf.dt
+    q_w = prob.robot.process.yaw_accel**2
+    lat = np.abs(w[:, 0]) * dt * np.sqrt(q_w * dt / 12.0)
+    out = np.empty((len(dt), 3))
+    out[:, 0] = 1e-3
+    out[:, 1] = np.sqrt(1e-6 + lat**2)
+    out[:, 2] = 1e-4
+    return out

@@ -1,0 +1,149 @@
+"""Keyframes for the factor-graph smoothers, with preintegrated odometry.
+
+Keyframe k sits at time t_k, a subset of the encoder timestamps (every n-th,
+n = round(encoder rate / keyframe rate)). Its variables are the pose X_k at
+t_k (Pose2) and W_k, the *averages* over the interval [t_k, t_{k+1}] of
+(v, omega, gyro_bias, slip_left, slip_right) plus the scale factors:
+
+    W_k = [v, omega, gyro_bias, slip_left, slip_right, scale_left, scale_right, scale_track]
+
+Averages make the wheel odometry exact: summing the encoder ticks over the
+interval gives the average wheel speed, which the encoder model (paper
+eq. 29) predicts from W_k with no approximation, because the model is linear
+in v, omega and slip for constant scale factors. Tick quantisation counts only
+once per interval. The pose moves by the exact arc of the average velocity
+(factors.motion). Gyro and velocity-sensor samples inside an interval are
+averaged; GPS fixes and ranges keep their own time, at offset tau after t_k.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from factors.encoder import speed_sigma
+from odomgraph.io.log import Log
+
+W_NAMES = ("v", "omega", "gyro_bias", "slip_left", "slip_right", "scale_left", "scale_right", "scale_track")
+
+
+@dataclass(frozen=True)
+class Keyframes:
+    t: np.ndarray
+    """(N,) keyframe times [s]."""
+    enc_m: np.ndarray
+    """(N-1, 2) average nominal-converted (left, right) wheel speed over each interval [m/s]."""
+    enc_sigma: np.ndarray
+    """(N-1, 2) its 1-sigma: eq. 41 averaged over the samples, plus quantisation [m/s]."""
+    gyro_z: np.ndarray
+    """(N-1,) average gyro reading over each interval [rad/s] (NaN-free; see gyro_n)."""
+    gyro_n: np.ndarray
+    """(N-1,) gyro samples per interval (0: none)."""
+    vel_z: np.ndarray
+    """(N-1, 2) average velocity-sensor reading [m/s, rad/s]."""
+    vel_n: np.ndarray
+    """(N-1,) velocity samples per interval."""
+    gps_k: np.ndarray
+    """(G,) interval of each GPS fix."""
+    gps_tau: np.ndarray
+    """(G,) time of the fix after t_k [s]."""
+    gps_xy: np.ndarray
+    """(G, 2) antenna position [m]."""
+    gps_sigma: np.ndarray
+    """(G,) 1-sigma [m]."""
+    rng_k: np.ndarray
+    rng_tau: np.ndarray
+    rng_beacon: np.ndarray
+    """(R, 2) beacon position [m]."""
+    rng_z: np.ndarray
+    """(R,) measured range [m]."""
+
+    @property
+    def dt(self) -> np.ndarray:
+        return np.diff(self.t)
+
+    @property
+    def n(self) -> int:
+        return len(self.t)
+
+
+def _bin(t_kf: np.ndarray, t: np.ndarray):
+    """Interval index of each time (t_k <= t < t_{k+1}) and the mask of those inside."""
+    k = np.searchsorted(t_kf, t, side="right") - 1
+    inside = (k >= 0) & (k < len(t_kf) - 1)
+    return k, inside
+
+
+def build_keyframes(log: Log, t_start: float, keyframe_hz: float) -> Keyframes:
+    """Keyframes from ``t_start`` on, at about ``keyframe_hz`` (at most the encoder rate)."""
+    r = log.robot
+    a, b = r.encoder_sigma
+    if log.encoders is not None:
+        e = log.encoders
+        tpm = np.array([r.ticks_per_meter_left, r.ticks_per_meter_right])
+        t_all = e.t
+        first = int(np.searchsorted(t_all, t_start, side="left"))
+        step = max(1, int(round((1.0 / keyframe_hz) / np.median(np.diff(t_all)))))
+        idx = np.arange(first, len(t_all), step)
+        if idx[-1] != len(t_all) - 1:
+            idx = np.append(idx, len(t_all) - 1)
+        t = t_all[idx]
+        ticks = np.stack([e.ticks_left, e.ticks_right], -1)
+        cum = np.concatenate([np.zeros((1, 2)), np.cumsum(ticks[1:], 0)])      # ticks up to row i
+        dt_k = np.diff(t)
+        m = (cum[idx[1:]] - cum[idx[:-1]]) / (tpm * dt_k[:, None])
+        # eq. 41 per encoder sample, averaged: var = sum (sigma_i dt_i)^2 / dt_k^2
+        dti = np.diff(t_all)
+        mi = ticks[1:] / (tpm * dti[:, None])
+        vi = ((a + b * np.abs(mi)) * dti[:, None]) ** 2
+        cumv = np.concatenate([np.zeros((1, 2)), np.cumsum(vi, 0)])
+        var = (cumv[idx[1:]] - cumv[idx[:-1]]) / dt_k[:, None] ** 2 + 1.0 / (6.0 * (tpm * dt_k[:, None]) ** 2)
+        sigma = np.sqrt(var)
+    else:
+        w = log.wheel_speeds
+        first = int(np.searchsorted(w.t, t_start, side="left"))
+        step = max(1, int(round((1.0 / keyframe_hz) / np.median(np.diff(w.t))))) if len(w.t) > 1 else 1
+        idx = np.arange(first, len(w.t), step)
+        if idx[-1] != len(w.t) - 1:
+            idx = np.append(idx, len(w.t) - 1)
+        t = w.t[idx]
+        k, inside = _bin(t, w.t)
+        ms = np.stack([w.v_left, w.v_right], -1)
+        n = np.bincount(k[inside], minlength=len(t) - 1).astype(float)
+        tot = np.stack([np.bincount(k[inside], ms[inside, j], minlength=len(t) - 1) for j in range(2)], -1)
+        m = tot / np.maximum(n, 1)[:, None]
+        sigma = speed_sigma(m, a, b) / np.sqrt(np.maximum(n, 1))[:, None]
+    nint = len(t) - 1
+
+    def averaged(ts, vals):
+        k, inside = _bin(t, ts)
+        n = np.bincount(k[inside], minlength=nint)
+        vals = np.atleast_2d(vals.T).T
+        tot = np.stack([np.bincount(k[inside], vals[inside, j], minlength=nint) for j in range(vals.shape[1])], -1)
+        return tot / np.maximum(n, 1)[:, None], n
+
+    gyro_z, gyro_n = np.zeros(nint), np.zeros(nint, int)
+    if log.gyro is not None and len(log.gyro.t):
+        z, gyro_n = averaged(log.gyro.t, log.gyro.omega)
+        gyro_z = z[:, 0]
+    vel_z, vel_n = np.zeros((nint, 2)), np.zeros(nint, int)
+    if log.velocity is not None and len(log.velocity.t):
+        vel_z, vel_n = averaged(log.velocity.t, np.stack([log.velocity.v, log.velocity.omega], -1))
+    empty2 = np.zeros((0, 2))
+    gk = gt = gs = np.zeros(0)
+    gxy = empty2
+    if log.gps is not None and len(log.gps.t):
+        g = log.gps
+        k, inside = _bin(t, g.t)
+        gk, gt = k[inside], g.t[inside] - t[k[inside]]
+        gxy = np.stack([g.x, g.y], -1)[inside]
+        gs = (g.sigma if g.sigma is not None else np.full(len(g.t), r.gps_sigma))[inside]
+    rk = rt = rz = np.zeros(0)
+    rb = empty2
+    if log.ranges is not None and len(log.ranges.t):
+        rg = log.ranges
+        k, inside = _bin(t, rg.t)
+        rk, rt, rz = k[inside], rg.t[inside] - t[k[inside]], rg.range[inside]
+        rb = np.asarray([[bc.x, bc.y] for bc in r.beacons])[rg.beacon[inside]]
+    return Keyframes(t, m, sigma, gyro_z, np.asarray(gyro_n), vel_z, np.asarray(vel_n),
+                     gk.astype(int), gt, gxy, gs, rk.astype(int), rt, rb, rz)
