@@ -41,7 +41,7 @@ class SmootherOptions:
     max_iterations: int = 50
     rel_tol: float = 1e-7
     """Stop when the cost decreases by less than this fraction."""
-    slip_cauchy: float | None = 0.01
+    slip_cauchy: float | None = 0.005
     """Cauchy scale [m/s] of the sparse zero-slip prior outside the calibration
     window (the whole log with ``calibrate_until=None``). None: no prior there,
     slip is a free random walk after the window as in the EKF."""

@@ -62,6 +62,7 @@ class Problem:
         self.gps_slot = _slots(kf.gps_k)
         self.rng_slot = _slots(kf.rng_k)
         self._rw_whiten = self._random_walk_whiteners()
+        self.motion_whiten = 1.0 / motion_sigma(kf, self.robot.process.yaw_accel**2)
 
     def _random_walk_whiteners(self) -> np.ndarray:
         """(N-1, 8, 8) inverse Cholesky factors of each W random-walk step covariance.
@@ -79,6 +80,7 @@ class Problem:
         qs = max(pn.scale, SCALE_FLOOR) ** 2
         for i in (5, 6, 7):
             Q[:, i, i] = qs * span
+        self.rw_cov = Q
         L = np.linalg.cholesky(Q)
         return np.linalg.inv(L)
 
@@ -111,121 +113,142 @@ class Linearization:
     """0.5 * sum of squared whitened residuals (robust-weighted where robust)."""
 
 
-def linearize(prob: Problem, pose: np.ndarray, W: np.ndarray, jacobians: bool = True) -> Linearization:
-    """Whitened linearisation at the estimate (pose (N, 3) world, W (N, 8))."""
+def linearize(prob: Problem, pose: np.ndarray, W: np.ndarray, k0: int = 0, k1: int | None = None) -> Linearization:
+    """Whitened linearisation at the estimate (pose (N, 3) world, W (N, 8)).
+
+    Only the intervals k0 <= k < k1 (default: all) are linearised, reading
+    keyframes k0..k1; the incremental smoothers linearise one new interval at a
+    time. The prior on keyframe 0 is included when k0 == 0.
+    """
     kf, r, pn = prob.kf, prob.robot, prob.robot.process
-    n1 = kf.n - 1
-    x, y, th = pose[:-1, 0], pose[:-1, 1], pose[:-1, 2]
-    w = W[:-1]
+    k1 = kf.n - 1 if k1 is None else k1
+    n1 = k1 - k0
+    x, y, th = pose[k0:k1, 0], pose[k0:k1, 1], pose[k0:k1, 2]
+    w = W[k0:k1]
+    dt = kf.dt[k0:k1]
     A_u = np.zeros((n1, prob.rows_unary, NB))
     b_u = np.zeros((n1, prob.rows_unary))
     robust_cost = 0.0
 
     # --- encoder over each interval (eq. 29-34), exact for the averages.
     h, J = encoder.wheel_speeds(w[:, 0], w[:, 1], w[:, 3], w[:, 4], w[:, 5], w[:, 6], w[:, 7], r.track_width)
-    inv = 1.0 / kf.enc_sigma
-    b_u[:, 0:2] = -(h - kf.enc_m) * inv
+    inv = 1.0 / kf.enc_sigma[k0:k1]
+    b_u[:, 0:2] = -(h - kf.enc_m[k0:k1]) * inv
     A_u[:, 0:2][:, :, _ENC_COLS] = J * inv[:, :, None]
     # --- gyro average (eq. 10-11): sample noise / n plus the spread of omega inside the interval.
-    has = kf.gyro_n > 0
+    gn = kf.gyro_n[k0:k1]
+    has = gn > 0
     if has.any():
-        sg = np.sqrt(r.gyro_sigma**2 / np.maximum(kf.gyro_n, 1) + pn.yaw_accel**2 * kf.dt / (6 * np.maximum(kf.gyro_n, 1)))
+        sg = np.sqrt(r.gyro_sigma**2 / np.maximum(gn, 1) + pn.yaw_accel**2 * dt / (6 * np.maximum(gn, 1)))
         h, J = gyro.yaw_rate(w[:, 1], w[:, 2])
         s = np.where(has, 1.0 / sg, 0.0)
-        b_u[:, 2] = -(h[:, 0] - kf.gyro_z) * s
+        b_u[:, 2] = -(h[:, 0] - kf.gyro_z[k0:k1]) * s
         A_u[:, 2, OM] = J[:, 0, 0] * s
         A_u[:, 2, B] = J[:, 0, 1] * s
     # --- velocity sensor average (sec. VI-B).
-    has = kf.vel_n > 0
+    vn = kf.vel_n[k0:k1]
+    has = vn > 0
     if has.any():
-        sv = np.asarray(r.velocity_sigma)[None, :] / np.sqrt(np.maximum(kf.vel_n, 1))[:, None]
+        sv = np.asarray(r.velocity_sigma)[None, :] / np.sqrt(np.maximum(vn, 1))[:, None]
         s = np.where(has[:, None], 1.0 / sv, 0.0)
-        b_u[:, 3:5] = -(w[:, 0:2] - kf.vel_z) * s
+        b_u[:, 3:5] = -(w[:, 0:2] - kf.vel_z[k0:k1]) * s
         A_u[:, 3, V] = s[:, 0]
         A_u[:, 4, OM] = s[:, 1]
     # --- slip: the schedule's zero-slip pseudo-prior (eq. 35-36) inside the
     # calibration window; outside it, optionally a sparse (Cauchy) zero prior.
-    s_fixed = np.where(prob.zero_slip, 1.0 / pn.pseudo_slip_sigma, 0.0)[:, None] * np.ones(2)
+    zero = prob.zero_slip[k0:k1]
+    s_fixed = np.where(zero, 1.0 / pn.pseudo_slip_sigma, 0.0)[:, None] * np.ones(2)
     sw = s_fixed
     if prob.slip_robust is not None:
         c = prob.slip_robust
-        s2 = w[:, 3:5] ** 2
-        free = ~prob.zero_slip
-        robust_cost = float(np.sum((0.5 * c**2 * np.log1p(s2 / c**2))[free]))
-        # IRLS: a Cauchy loss acts as a Gaussian of weight 1 / (1 + (s/c)^2) at the current s.
-        sw = np.where(free[:, None], np.sqrt(1.0 / (1.0 + s2 / c**2)) / c, s_fixed)
+        # Cauchy loss of the whitened slip norm u = |s|/c (both wheels jointly, as
+        # GTSAM's Robust(Cauchy) noise model): rho = log(1 + u^2) / 2. IRLS: at the
+        # current s it acts as Gaussian rows of weight 1 / (1 + u^2), whose
+        # gradient equals rho's.
+        u2 = np.sum(w[:, 3:5] ** 2, 1) / c**2
+        free = ~zero
+        robust_cost = float(np.sum((0.5 * np.log1p(u2))[free]))
+        sw = np.where(free[:, None], (np.sqrt(1.0 / (1.0 + u2)) / c)[:, None] * np.ones(2), s_fixed)
     b_u[:, 5:7] = -w[:, 3:5] * sw
     A_u[:, 5, SL] = sw[:, 0]
     A_u[:, 6, SR] = sw[:, 1]
     # --- GPS fixes (eq. 8-9) at tau after t_k, on the arc flown from X_k.
-    if kf.gps_k.size:
-        k = kf.gps_k
-        p, Jf = propagate(x[k], y[k], th[k], w[k, 0], w[k, 1], kf.gps_tau)
+    g0, g1 = np.searchsorted(kf.gps_k, [k0, k1])
+    if g1 > g0:
+        k = kf.gps_k[g0:g1] - k0
+        p, Jf = propagate(x[k], y[k], th[k], w[k, 0], w[k, 1], kf.gps_tau[g0:g1])
         h, Jh = gps_model.antenna_position(p[:, 0], p[:, 1], p[:, 2], r.gps_lever_arm)
         Jt = Jh @ Jf                                              # (G, 2, 5) world (x, y, theta, v, omega)
-        inv = (1.0 / kf.gps_sigma)[:, None]
-        rows = 7 + 2 * prob.gps_slot
+        inv = (1.0 / kf.gps_sigma[g0:g1])[:, None]
+        rows = 7 + 2 * prob.gps_slot[g0:g1]
         for j in range(2):
-            b_u[k, rows + j] = -(h[:, j] - kf.gps_xy[:, j]) * inv[:, 0]
+            b_u[k, rows + j] = -(h[:, j] - kf.gps_xy[g0:g1, j]) * inv[:, 0]
             A_u[k, rows + j, 0:3] = pose2.to_body(Jt[:, j:j + 1, 0:3], th[k])[:, 0] * inv
             A_u[k, rows + j, V] = Jt[:, j, 3] * inv[:, 0]
             A_u[k, rows + j, OM] = Jt[:, j, 4] * inv[:, 0]
     # --- ranges (eq. 12-16), likewise.
-    if kf.rng_k.size:
-        k = kf.rng_k
-        p, Jf = propagate(x[k], y[k], th[k], w[k, 0], w[k, 1], kf.rng_tau)
-        h, Jh = ranging.beacon_range(p[:, 0], p[:, 1], p[:, 2], kf.rng_beacon, r.range_lever_arm)
+    q0, q1 = np.searchsorted(kf.rng_k, [k0, k1])
+    if q1 > q0:
+        k = kf.rng_k[q0:q1] - k0
+        p, Jf = propagate(x[k], y[k], th[k], w[k, 0], w[k, 1], kf.rng_tau[q0:q1])
+        h, Jh = ranging.beacon_range(p[:, 0], p[:, 1], p[:, 2], kf.rng_beacon[q0:q1], r.range_lever_arm)
         Jt = Jh[:, :, :3] @ Jf
         inv = 1.0 / r.range_sigma
-        rows = 7 + 2 * prob.g_max + prob.rng_slot
-        b_u[k, rows] = -(h[:, 0] - kf.rng_z) * inv
+        rows = 7 + 2 * prob.g_max + prob.rng_slot[q0:q1]
+        b_u[k, rows] = -(h[:, 0] - kf.rng_z[q0:q1]) * inv
         A_u[k, rows, 0:3] = pose2.to_body(Jt[:, :, 0:3], th[k])[:, 0] * inv
         A_u[k, rows, V] = Jt[:, 0, 3] * inv
         A_u[k, rows, OM] = Jt[:, 0, 4] * inv
 
     # --- motion: X_{k+1} against the arc of W_k's average velocity.
-    e, J0, J1 = transition_residual(x, y, th, w[:, 0], w[:, 1], kf.dt, pose[1:, 0], pose[1:, 1], pose[1:, 2])
-    sm = 1.0 / motion_sigma(prob, w)
+    nxt = pose[k0 + 1:k1 + 1]
+    e, J0, J1 = transition_residual(x, y, th, w[:, 0], w[:, 1], dt, nxt[:, 0], nxt[:, 1], nxt[:, 2])
+    sm = prob.motion_whiten[k0:k1]
     b_m = -e * sm
     A_m0 = np.zeros((n1, 3, NB))
     A_m0[:, :, 0:3] = pose2.to_body(J0[:, :, 0:3], th) * sm[:, :, None]
     A_m0[:, :, V] = J0[:, :, 3] * sm
     A_m0[:, :, OM] = J0[:, :, 4] * sm
-    A_m1 = pose2.to_body(J1, pose[1:, 2]) * sm[:, :, None]
+    A_m1 = pose2.to_body(J1, nxt[:, 2]) * sm[:, :, None]
 
     # --- random walk of W (linear).
-    dW = W[1:] - W[:-1]
-    b_w = -np.einsum("kij,kj->ki", prob._rw_whiten, dW)
+    dW = W[k0 + 1:k1 + 1] - W[k0:k1]
+    A_w = prob._rw_whiten[k0:k1]
+    b_w = -np.einsum("kij,kj->ki", A_w, dW)
 
     # --- prior on keyframe 0 (world-frame covariance mapped to the body tangent).
-    d0 = np.concatenate([[pose[0, 0], pose[0, 1], pose[0, 2]], W[0]]) - prob.prior_mean
-    d0[2] = np.angle(np.exp(1j * d0[2]))
-    Lp = np.linalg.inv(np.linalg.cholesky(prob.prior_cov))
-    M = np.eye(NB)
-    c0, s0 = np.cos(pose[0, 2]), np.sin(pose[0, 2])
-    M[0:2, 0:2] = [[c0, -s0], [s0, c0]]                      # d world / d body
-    A_p = Lp @ M
-    b_p = -Lp @ d0
+    A_p = b_p = None
+    if k0 == 0:
+        d0 = np.concatenate([[pose[0, 0], pose[0, 1], pose[0, 2]], W[0]]) - prob.prior_mean
+        d0[2] = np.angle(np.exp(1j * d0[2]))
+        Lp = np.linalg.inv(np.linalg.cholesky(prob.prior_cov))
+        M = np.eye(NB)
+        c0, s0 = np.cos(pose[0, 2]), np.sin(pose[0, 2])
+        M[0:2, 0:2] = [[c0, -s0], [s0, c0]]                      # d world / d body
+        A_p = Lp @ M
+        b_p = -Lp @ d0
 
-    cost = 0.5 * (np.sum(b_u**2) + np.sum(b_m**2) + np.sum(b_w**2) + np.sum(b_p**2))
+    cost = 0.5 * (np.sum(b_u**2) + np.sum(b_m**2) + np.sum(b_w**2) + (np.sum(b_p**2) if b_p is not None else 0.0))
     if prob.slip_robust is not None:
         # the IRLS rows above carry the weighted square; count the true Cauchy cost instead
-        free = ~prob.zero_slip
+        free = ~prob.zero_slip[k0:k1]
         cost += robust_cost - 0.5 * np.sum(b_u[free, 5:7] ** 2)
-    return Linearization(A_u, b_u, A_m0, A_m1, b_m, prob._rw_whiten, b_w, A_p, b_p, float(cost))
+    return Linearization(A_u, b_u, A_m0, A_m1, b_m, A_w, b_w, A_p, b_p, float(cost))
 
 
-def motion_sigma(prob: Problem, w: np.ndarray) -> np.ndarray:
+def motion_sigma(kf: Keyframes, q_w: float) -> np.ndarray:
     """(N-1, 3) 1-sigma of the motion residual (along-track, lateral [m], heading [rad]).
 
     With W_k the exact interval average, the arc is exact for a constant
     yaw rate; what remains is the yaw rate varying inside the interval, which
     bends the path sideways by about |v| dt * sqrt(q_omega dt / 12), plus
-    a 1 mm / 0.1 mrad floor for everything second order.
+    a 1 mm / 0.1 mrad floor for everything second order. |v| comes from the
+    measured wheel speeds, not the estimate: a noise model that moved with the
+    state would add a term to the cost that Gauss-Newton does not see.
     """
-    dt = prob.kf.dt
-    q_w = prob.robot.process.yaw_accel**2
-    lat = np.abs(w[:, 0]) * dt * np.sqrt(q_w * dt / 12.0)
+    dt = kf.dt
+    speed = np.abs(kf.enc_m.mean(1))
+    lat = speed * dt * np.sqrt(q_w * dt / 12.0)
     out = np.empty((len(dt), 3))
     out[:, 0] = 1e-3
     out[:, 1] = np.sqrt(1e-6 + lat**2)

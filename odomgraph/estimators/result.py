@@ -41,6 +41,8 @@ class Estimate:
     notes: list[str] = field(default_factory=list)
     online: "Estimate | None" = None
     """For incremental smoothers: the causal estimate as it stood at each time."""
+    update_times: np.ndarray | None = None
+    """Wall time of each incremental update [s] (incremental smoothers)."""
 
     def __post_init__(self):
         n = len(self.t)

@@ -1,0 +1,355 @@
+"""Incremental smoothers: gtsam.ISAM2 and gtsam.IncrementalFixedLagSmoother.
+
+Each keyframe k+1 triggers one true incremental update with what arrived in
+(t_k, t_{k+1}]: the new variables X_{k+1} (Pose2), W_{k+1} (Vector6: v, omega,
+gyro_bias, scale_left, scale_right, scale_track) and S_{k+1} (Vector2:
+slip_left, slip_right), and the factors of interval k. No factor calls back
+into Python, because GTSAM copies the whole Values for every Python callback
+inside an update, which costs O(n) per factor (ESTIMATION-NOTES.md):
+
+* the measurement and motion factors of interval k are linearised in numpy
+  (graph.linearize, the EKF's models) at the current estimate and enter as
+  gtsam.LinearContainerFactor, which GTSAM moves with the estimate to first
+  order;
+* random walks are gtsam.BetweenFactorVector, and the slip priors are
+  gtsam.PriorFactorVector: zero-slip (the schedule) inside the calibration
+  window, robust Cauchy (sparse slip) outside it, as in the batch solver.
+
+Slip has its own key so that its robust prior can be a built-in factor.
+There are no global keys: the scale factors are per-keyframe copies tied by a
+tight random walk (see graph.SCALE_FLOOR).
+"""
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+
+import gtsam
+import numpy as np
+from gtsam.symbol_shorthand import S as S_KEY
+from gtsam.symbol_shorthand import W as W_KEY
+from gtsam.symbol_shorthand import X as X_KEY
+
+from factors.motion import propagate
+from factors._math import wrap_angle
+from odomgraph import state as St
+from odomgraph.errors import EstimatorDivergedError
+from odomgraph.estimators.batch import (SmootherOptions, build_problem, keyframe_rows, marginal_blocks,
+                                        _n_measurements)
+from odomgraph.estimators.graph import NB, Problem, linearize
+from odomgraph.estimators.measurements import from_log
+from odomgraph.estimators.result import Estimate
+from odomgraph.estimators.schedule import Schedule
+from odomgraph.io.log import Log
+
+# Block columns (state.NAMES order) of each incremental variable.
+X_COLS = [0, 1, 2]
+W_COLS = [3, 4, 5, 8, 9, 10]
+S_COLS = [6, 7]
+W_IDX = [0, 1, 2, 5, 6, 7]   # rows of the 8-vector W (graph.py) in W_KEY
+S_IDX = [3, 4]
+
+
+@dataclass(frozen=True)
+class IncrementalOptions(SmootherOptions):
+    lag: float = 5.0
+    """Fixed-lag window [s] (fixed-lag only)."""
+    relinearize_threshold: float = 0.05
+    """ISAM2 relinearisation threshold of pose [m, rad] and velocity [m/s, rad/s]
+    (built-in factors); bias, scale and slip thresholds are scaled from it."""
+    relinearize_after: float = 2.0
+    """Age [s] at which an interval's linear factors are linearised again, at
+    the by then nearly final estimate (they were first linearised at a
+    prediction). 0 disables."""
+
+
+def _params(options: IncrementalOptions, reuse_slots: bool = False) -> gtsam.ISAM2Params:
+    p = gtsam.ISAM2Params()
+    # Marginalisation and relinearisation remove factors; without reusing their
+    # slots the factor list, and every update with it, grows with the log.
+    p.findUnusedFactorSlots = reuse_slots
+    # QR: the scale random walk is very tight, Cholesky loses it (measured:
+    # IndeterminateSystemException at sigma 1e-5).
+    p.setFactorization("QR")
+    # Per-variable relinearisation thresholds, in each variable's own units.
+    # Slip needs a small one: its robust (Cauchy) prior is re-weighted only when
+    # slip is relinearised, and the weight changes a lot within a few c.
+    th = gtsam.ISAM2ThresholdMap()
+    r = options.relinearize_threshold
+    th.insert(("x", np.full(3, r)))
+    th.insert(("w", np.array([r, r, r / 10, 4e-3 * r, 4e-3 * r, 4e-3 * r])))
+    c = options.slip_cauchy if options.slip_cauchy is not None else 0.05
+    th.insert(("s", np.full(2, 0.2 * c)))
+    p.setRelinearizeThreshold(th)
+    p.relinearizeSkip = 1
+    p.enablePartialRelinearizationCheck = True
+    p.evaluateNonlinearError = False
+    return p
+
+
+class _Graph:
+    """Builds the per-interval GTSAM factors of a Problem."""
+
+    def __init__(self, prob: Problem, options: IncrementalOptions):
+        self.prob, self.options = prob, options
+        pn = prob.robot.process
+        self.zero_model = gtsam.noiseModel.Isotropic.Sigma(2, pn.pseudo_slip_sigma)
+        c = options.slip_cauchy
+        self.robust_model = None if c is None else gtsam.noiseModel.Robust.Create(
+            gtsam.noiseModel.mEstimator.Cauchy.Create(1.0), gtsam.noiseModel.Isotropic.Sigma(2, c))
+        # The numpy linearisation must not add the slip priors: built-ins carry them.
+        self.lin_prob = Problem(prob.kf, prob.robot, prob.prior_mean, prob.prior_cov,
+                                np.zeros_like(prob.zero_slip), None, prob.q_slip)
+
+    def values(self, k: int, pose, W) -> gtsam.Values:
+        v = gtsam.Values()
+        v.insert(X_KEY(k), gtsam.Pose2(*pose[k]))
+        v.insert(W_KEY(k), W[k, W_IDX].copy())
+        v.insert(S_KEY(k), W[k, S_IDX].copy())
+        return v
+
+    def prior_factors(self, pose, W) -> gtsam.NonlinearFactorGraph:
+        lin = linearize(self.lin_prob, pose, W, 0, 1)
+        g = gtsam.NonlinearFactorGraph()
+        lp = self.values(0, pose, W)
+        jf = gtsam.JacobianFactor(X_KEY(0), lin.A_p[:, X_COLS], W_KEY(0), lin.A_p[:, W_COLS], S_KEY(0),
+                                  lin.A_p[:, S_COLS], lin.b_p, gtsam.noiseModel.Unit.Create(NB))
+        g.add(gtsam.LinearContainerFactor(jf, lp))
+        return g
+
+    def linear_factors(self, k: int, pose, W) -> gtsam.NonlinearFactorGraph:
+        """The measurement and motion factors of interval k, linearised at (pose, W)."""
+        lin = linearize(self.lin_prob, pose, W, k, k + 1)
+        g = gtsam.NonlinearFactorGraph()
+        lp = self.values(k, pose, W)
+        lp.insert(X_KEY(k + 1), gtsam.Pose2(*pose[k + 1]))
+        A, b = lin.A_u[0], lin.b_u[0]
+        rows = np.any(A != 0, 1)            # drop the padding of sensors without data
+        if rows.any():
+            A, b = A[rows], b[rows]
+            jf = gtsam.JacobianFactor(X_KEY(k), A[:, X_COLS], W_KEY(k), A[:, W_COLS], S_KEY(k), A[:, S_COLS], b,
+                                      gtsam.noiseModel.Unit.Create(len(b)))
+            g.add(gtsam.LinearContainerFactor(jf, lp))
+        Am = lin.A_m0[0]
+        jf = gtsam.JacobianFactor(X_KEY(k), Am[:, X_COLS], W_KEY(k), Am[:, W_COLS], X_KEY(k + 1), lin.A_m1[0],
+                                  lin.b_m[0], gtsam.noiseModel.Unit.Create(3))
+        g.add(gtsam.LinearContainerFactor(jf, lp))
+        return g
+
+    def interval_factors(self, k: int, pose, W) -> gtsam.NonlinearFactorGraph:
+        """All factors of interval k: linear ones first (see linear_factors), then built-ins."""
+        prob = self.prob
+        g = self.linear_factors(k, pose, W)
+        Q = prob.rw_cov[k]
+        g.add(gtsam.BetweenFactorVector(W_KEY(k), W_KEY(k + 1), np.zeros(6),
+                                        gtsam.noiseModel.Gaussian.Covariance(Q[np.ix_(W_IDX, W_IDX)])))
+        g.add(gtsam.BetweenFactorVector(S_KEY(k), S_KEY(k + 1), np.zeros(2),
+                                        gtsam.noiseModel.Gaussian.Covariance(Q[np.ix_(S_IDX, S_IDX)])))
+        if prob.zero_slip[k]:
+            g.add(gtsam.PriorFactorVector(S_KEY(k), np.zeros(2), self.zero_model))
+        elif self.robust_model is not None:
+            g.add(gtsam.PriorFactorVector(S_KEY(k), np.zeros(2), self.robust_model))
+        return g
+
+
+def _read(est_fn, k: int):
+    """(pose (3,), W (8,)) of keyframe k from an estimate accessor."""
+    p = est_fn.atPose2(X_KEY(k)) if hasattr(est_fn, "atPose2") else None
+    return p
+
+
+def _predict(pose, W, k):
+    """Keyframe k+1 predicted from k: the arc of W_k, W carried over."""
+    p, _ = propagate(*pose[k], W[k, 0], W[k, 1], 0.0)
+    return p
+
+
+class _Runner:
+    """The shared loop; subclasses hold the GTSAM engine."""
+
+    method = ""
+
+    def __init__(self, log: Log, schedule: Schedule, options: IncrementalOptions):
+        self.log, self.schedule, self.options = log, schedule, options
+        self.prob = build_problem(log, schedule, options)
+        self.graph = _Graph(self.prob, options)
+        n = self.prob.kf.n
+        self.pose = np.zeros((n, 3))
+        self.W = np.zeros((n, 8))
+        self.pose[0] = self.prob.prior_mean[0:3]
+        self.W[0] = self.prob.prior_mean[3:]
+        self.update_times = np.zeros(n)
+
+    def _new_keyframe(self, k: int) -> None:
+        """Predict keyframe k from k-1 (its initial value)."""
+        kf = self.prob.kf
+        p, _ = propagate(*self.pose[k - 1], self.W[k - 1, 0], self.W[k - 1, 1], kf.dt[k - 1])
+        self.pose[k] = [p[0], p[1], wrap_angle(p[2])]
+        self.W[k] = self.W[k - 1]
+
+    def _store(self, k: int, values) -> None:
+        p = values.atPose2(X_KEY(k))
+        self.pose[k] = [p.x(), p.y(), p.theta()]
+        self.W[k, W_IDX] = values.atVector(W_KEY(k))
+        self.W[k, S_IDX] = values.atVector(S_KEY(k))
+
+    def run(self, progress=None) -> Estimate:
+        wall0 = time.perf_counter()
+        kf = self.prob.kf
+        n = kf.n
+        self.start(self.graph.prior_factors(self.pose, self.W), self.graph.values(0, self.pose, self.W))
+        stride = max(1, n // 200)
+        for k in range(1, n):
+            t0 = time.perf_counter()
+            self._new_keyframe(k)
+            factors = self.graph.interval_factors(k - 1, self.pose, self.W)
+            self.step(k, factors, self.graph.values(k, self.pose, self.W))
+            self.update_times[k] = time.perf_counter() - t0
+            if not (np.all(np.isfinite(self.pose[k])) and np.all(np.isfinite(self.W[k]))):
+                raise EstimatorDivergedError(f"{self.method} diverged at t={kf.t[k]:.3f} s: non-finite estimate")
+            if progress is not None and k % stride == 0:
+                progress(k, n)
+        est = self.finish()
+        est.wall_time_s = time.perf_counter() - wall0
+        est.n_updates = _n_measurements(self.prob)
+        t0 = from_log(self.log).t_start
+        est.t_switch = None if self.schedule.calibrate_until is None else t0 + self.schedule.calibrate_until
+        est.update_times = self.update_times[1:]
+        return est
+
+
+class ISAM2Runner(_Runner):
+    method = "isam2"
+
+    def start(self, factors, values):
+        self.isam = gtsam.ISAM2(_params(self.options, reuse_slots=True))
+        self.isam.update(factors, values)
+        self.linear_index: dict[int, list[int]] = {}
+        self._relin_next = 0
+        self.online = np.zeros((self.prob.kf.n, St.N))
+        self.online_sigma = np.zeros((self.prob.kf.n, St.N))
+
+    def step(self, k, factors, values):
+        isam, kf = self.isam, self.prob.kf
+        n_lin = sum(1 for i in range(factors.size()) if isinstance(factors.at(i), gtsam.LinearContainerFactor))
+        remove = []
+        # Re-linearise the interval that just became `relinearize_after` old.
+        j = self._relin_next
+        age = self.options.relinearize_after
+        if age > 0 and j < k - 1 and kf.t[k] - kf.t[j + 1] >= age:
+            extra = self.graph.linear_factors(j, self.pose, self.W)
+            remove = self.linear_index.pop(j)
+            for i in range(extra.size()):
+                factors.add(extra.at(i))
+            self._relin_next = j + 1
+        else:
+            extra = None
+        res = isam.update(factors, values, remove)
+        idx = list(res.getNewFactorsIndices())
+        self.linear_index[k - 1] = idx[:n_lin]
+        if extra is not None:
+            self.linear_index[j] = idx[factors.size() - extra.size():]
+        # Read back what the relinearisation window needs (and the newest keyframe).
+        lo = max(0, min(self._relin_next, k - 1))
+        for i in range(lo, k + 1):
+            p = isam.calculateEstimatePose2(X_KEY(i))
+            self.pose[i] = [p.x(), p.y(), p.theta()]
+            self.W[i, W_IDX] = isam.calculateEstimateVector(W_KEY(i))
+            self.W[i, S_IDX] = isam.calculateEstimateVector(S_KEY(i))
+        # The causal estimate at t_k, of the state at the midpoint of the
+        # interval just completed (its averages are what the smoother knows).
+        half = 0.5 * kf.dt[k - 1]
+        p, Jf = propagate(*self.pose[k - 1], self.W[k - 1, 0], self.W[k - 1, 1], half)
+        row = np.empty(St.N)
+        row[0:2], row[2] = p[0:2], wrap_angle(p[2])
+        row[3:] = self.W[k - 1]
+        self.online[k] = row
+        Px = isam.marginalCovariance(X_KEY(k - 1))
+        Pw = isam.marginalCovariance(W_KEY(k - 1))
+        Ps = isam.marginalCovariance(S_KEY(k - 1))
+        # pose at the midpoint: arc Jacobian on X (body) and (v, omega); cross terms ignored
+        from factors import pose2
+        Jx = pose2.to_body(Jf[:, 0:3], self.pose[k - 1, 2])
+        Jv = Jf[:, 3:5]
+        Pp = Jx @ Px @ Jx.T + Jv @ Pw[0:2, 0:2] @ Jv.T
+        self.online_sigma[k, 0:3] = np.sqrt(np.maximum(np.diag(Pp), 0))
+        self.online_sigma[k, [3, 4, 5, 8, 9, 10]] = np.sqrt(np.maximum(np.diag(Pw), 0))
+        self.online_sigma[k, [6, 7]] = np.sqrt(np.maximum(np.diag(Ps), 0))
+
+    def finish(self) -> Estimate:
+        values = self.isam.calculateEstimate()
+        for k in range(self.prob.kf.n):
+            self._store(k, values)
+        Sig = marginal_blocks(self.prob, self.pose, self.W)
+        est = keyframe_rows(self.prob, self.pose, self.W, Sig, "isam2")
+        est.calibration_sigma = np.sqrt(np.diagonal(Sig[-1])[8:11])
+        kf = self.prob.kf
+        online = Estimate("isam2-online", kf.t[:-1] + 0.5 * kf.dt, self.online[1:], self.online_sigma[1:])
+        est.online = online
+        est.notes = [f"isam2: {kf.n} keyframes at {self.options.keyframe_hz:g} Hz, one ISAM2 update each"]
+        return est
+
+
+class FixedLagRunner(_Runner):
+    method = "fixed-lag"
+
+    def start(self, factors, values):
+        self.smoother = gtsam.IncrementalFixedLagSmoother(self.options.lag, _params(self.options, reuse_slots=True))
+        self.done = np.zeros(self.prob.kf.n, bool)
+        self.Sig = np.zeros((self.prob.kf.n, NB, NB))
+        self._update(factors, values, [0])
+
+    def _update(self, factors, values, keyframes):
+        stamps = gtsam.FixedLagSmootherKeyTimestampMap()
+        for k in keyframes:
+            t = float(self.prob.kf.t[k])
+            for key in (X_KEY(k), W_KEY(k), S_KEY(k)):
+                stamps.insert((key, t))
+        self.smoother.update(factors, values, stamps)
+
+    def _harvest(self, k):
+        """Record keyframe k's fixed-lag estimate and marginals before it leaves the window."""
+        est = self.smoother.calculateEstimate()
+        self._store(k, est)
+        Sig = np.zeros((NB, NB))
+        Sig[np.ix_(X_COLS, X_COLS)] = self.smoother.marginalCovariance(X_KEY(k))
+        Sig[np.ix_(W_COLS, W_COLS)] = self.smoother.marginalCovariance(W_KEY(k))
+        Sig[np.ix_(S_COLS, S_COLS)] = self.smoother.marginalCovariance(S_KEY(k))
+        self.Sig[k] = Sig
+        self.done[k] = True
+
+    def step(self, k, factors, values):
+        kf = self.prob.kf
+        # Keyframes that the coming update marginalises: take their estimate now.
+        t_new = kf.t[k]
+        for j in np.nonzero(~self.done[:k] & (kf.t[:k] < t_new - self.options.lag))[0]:
+            self._harvest(int(j))
+        self._update(factors, values, [k])
+        est = self.smoother.calculateEstimate()
+        for j in (k - 1, k):
+            if not self.done[j]:
+                self._store(j, est)
+
+    def finish(self) -> Estimate:
+        for j in np.nonzero(~self.done)[0]:
+            self._harvest(int(j))
+        est = keyframe_rows(self.prob, self.pose, self.W, self.Sig, "fixed-lag")
+        # Window marginals are per variable: the cross-covariance of X, W and S
+        # of one keyframe is not available, so pose sigma at the row time
+        # ignores it (it is second order for the pose).
+        est.calibration_sigma = np.sqrt(np.diagonal(self.Sig[-1])[8:11])
+        est.notes = [f"fixed-lag: {self.prob.kf.n} keyframes at {self.options.keyframe_hz:g} Hz, lag "
+                     f"{self.options.lag:g} s"]
+        return est
+
+
+def run_isam2(log: Log, schedule: Schedule = Schedule(), options: IncrementalOptions = IncrementalOptions(),
+              progress=None) -> Estimate:
+    """One gtsam.ISAM2 update per keyframe; final smoothed states plus the online (causal) estimate."""
+    return ISAM2Runner(log, schedule, options).run(progress)
+
+
+def run_fixed_lag(log: Log, schedule: Schedule = Schedule(), options: IncrementalOptions = IncrementalOptions(),
+                  progress=None) -> Estimate:
+    """gtsam.IncrementalFixedLagSmoother with ``options.lag`` seconds."""
+    return FixedLagRunner(log, schedule, options).run(progress)

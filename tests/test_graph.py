@@ -1,0 +1,74 @@
+"""The smoother's vectorised linearisation against numerical derivatives of
+its own residuals (through the Pose2 retraction), factor by factor."""
+import numpy as np
+import pytest
+
+from odomgraph.estimators import batch as B
+from odomgraph.estimators.graph import NB, linearize
+from odomgraph.estimators.schedule import Schedule
+from odomgraph.sim.scenarios import Rates, beacons_around, paper
+from odomgraph.sim.simulate import simulate
+
+
+def residuals(prob, pose, W):
+    lin = linearize(prob, pose, W)
+    return {"u": -lin.b_u, "m": -lin.b_m, "w": -lin.b_w, "p": -lin.b_p}, lin
+
+
+@pytest.fixture(scope="module")
+def problem():
+    sc = paper(30).with_(rates=Rates(gps=20, ranges=5, velocity=5))
+    sc = sc.with_(robot=sc.robot.with_(beacons=beacons_around(0, 15, -5, 5)))
+    log = simulate(sc, 1)
+    prob = B.build_problem(log, Schedule(10.0), B.SmootherOptions(keyframe_hz=5, slip_cauchy=None))
+    rng = np.random.default_rng(0)
+    from odomgraph.estimators.ekf import run_ekf
+    pose, W = B.initial_guess(prob, run_ekf(log, Schedule(10.0)))
+    pose = pose + rng.normal(0, [0.05, 0.05, 0.02], pose.shape)   # off the optimum: residuals nonzero
+    W = W + rng.normal(0, 0.01, W.shape)
+    return prob, pose, W
+
+
+@pytest.mark.parametrize("k", [0, 7, 40, 90])
+def test_linearization_matches_numerical_derivatives(problem, k):
+    prob, pose, W = problem
+    r0, lin = residuals(prob, pose, W)
+    eps = 1e-6
+    for j in range(NB):
+        d = np.zeros((prob.kf.n, NB))
+        d[k, j] = eps
+        rp, _ = residuals(prob, *B.retract(pose, W, d))
+        rm, _ = residuals(prob, *B.retract(pose, W, -d))
+        num = {key: (rp[key] - rm[key]) / (2 * eps) for key in r0}
+        # unary rows of interval k act on block k
+        np.testing.assert_allclose(lin.A_u[k][:, j], num["u"][k], rtol=1e-5, atol=1e-5 * (1 + np.abs(num["u"][k]).max()))
+        # motion rows: interval k (block k) and interval k-1 (pose of block k)
+        np.testing.assert_allclose(lin.A_m0[k][:, j], num["m"][k], rtol=1e-5, atol=1e-4)
+        if k > 0 and j < 3:
+            np.testing.assert_allclose(lin.A_m1[k - 1][:, j], num["m"][k - 1], rtol=1e-5, atol=1e-4)
+        if j >= 3:
+            np.testing.assert_allclose(-lin.A_w[k][:, j - 3], num["w"][k], rtol=1e-6, atol=1e-6)
+        if k == 0:
+            np.testing.assert_allclose(lin.A_p[:, j], num["p"], rtol=1e-5, atol=1e-5)
+
+
+def test_robust_slip_rows_have_the_gradient_of_the_cauchy_cost():
+    # IRLS rows must descend the cost the line search evaluates.
+    sc = paper(30)
+    log = simulate(sc, 2)
+    prob = B.build_problem(log, Schedule(10.0), B.SmootherOptions(keyframe_hz=5, slip_cauchy=0.01))
+    from odomgraph.estimators.ekf import run_ekf
+    pose, W = B.initial_guess(prob, run_ekf(log, Schedule(10.0)))
+    W[:, 3:5] += np.random.default_rng(3).normal(0, 0.02, (len(W), 2))
+    lin = linearize(prob, pose, W)
+    k = int(np.argmax(~prob.zero_slip)) + 3
+    for j in (6, 7):  # slip_left, slip_right columns
+        d = np.zeros((prob.kf.n, NB))
+        d[k, j] = 1e-7
+        cp = linearize(prob, *B.retract(pose, W, d)).cost
+        cm = linearize(prob, *B.retract(pose, W, -d)).cost
+        grad_num = (cp - cm) / 2e-7
+        # gradient of 0.5 ||A d - b||^2 at d = 0 is -A^T b, summed over every row touching block k
+        A1, A2, b = B._factor_arrays(prob, lin)
+        grad = -(A1[k][:, j] @ b[k]) - (A2[k - 1][:, j] @ b[k - 1])
+        assert grad == pytest.approx(grad_num, rel=1e-4, abs=1e-6)
