@@ -54,3 +54,116 @@ class FilterPyEKF(EKF):
         self.x, self.P = fp.x, fp.P
         y = np.atleast_1d(z) - h
         return float(y @ np.linalg.solve(fp.S, y))
+
+
+# --------------------------------------------------------------------------
+# The straightforward GTSAM design: the same keyframe graph built from plain
+# gtsam.CustomFactors (factors/gtsam_factors.py), solved by GTSAM's own
+# LevenbergMarquardtOptimizer or by one ISAM2 update per keyframe.
+def straightforward_graph(prob, k0: int = 0, k1: int | None = None):
+    """NonlinearFactorGraph of intervals k0..k1-1 (plus the prior when k0 == 0)."""
+    import gtsam
+    from gtsam.symbol_shorthand import S as SK, W as WK, X as XK
+    from factors import gtsam_factors as gf
+    from odomgraph.estimators.incremental import S_IDX, W_IDX
+    kf, r, pn = prob.kf, prob.robot, prob.robot.process
+    k1 = kf.n - 1 if k1 is None else k1
+    g = gtsam.NonlinearFactorGraph()
+    if k0 == 0:
+        m, P = prob.prior_mean, prob.prior_cov
+        c, s = np.cos(m[2]), np.sin(m[2])
+        Rb = np.eye(3)
+        Rb[0:2, 0:2] = [[c, s], [-s, c]]
+        g.add(gtsam.PriorFactorPose2(XK(0), gtsam.Pose2(*m[0:3]),
+                                     gtsam.noiseModel.Gaussian.Covariance(Rb @ P[0:3, 0:3] @ Rb.T)))
+        g.add(gtsam.PriorFactorVector(WK(0), m[3:][W_IDX], gtsam.noiseModel.Gaussian.Covariance(
+            P[3:, 3:][np.ix_(W_IDX, W_IDX)])))
+        g.add(gtsam.PriorFactorVector(SK(0), m[3:][S_IDX], gtsam.noiseModel.Gaussian.Covariance(
+            P[3:, 3:][np.ix_(S_IDX, S_IDX)])))
+    robust = None if prob.slip_robust is None else gtsam.noiseModel.Robust.Create(
+        gtsam.noiseModel.mEstimator.Cauchy.Create(1.0), gtsam.noiseModel.Isotropic.Sigma(2, prob.slip_robust))
+    for k in range(k0, k1):
+        g.add(gf.encoder_factor(WK(k), SK(k), kf.enc_m[k], gtsam.noiseModel.Diagonal.Sigmas(kf.enc_sigma[k]),
+                                r.track_width))
+        if kf.gyro_n[k]:
+            sg = np.sqrt(r.gyro_sigma**2 / kf.gyro_n[k] + pn.yaw_accel**2 * kf.dt[k] / (6 * kf.gyro_n[k]))
+            g.add(gf.gyro_factor(WK(k), kf.gyro_z[k], gtsam.noiseModel.Isotropic.Sigma(1, sg)))
+        if kf.vel_n[k]:
+            g.add(gf.velocity_factor(WK(k), kf.vel_z[k], gtsam.noiseModel.Diagonal.Sigmas(
+                np.asarray(r.velocity_sigma) / np.sqrt(kf.vel_n[k]))))
+        for i in range(*np.searchsorted(kf.gps_k, [k, k + 1])):
+            g.add(gf.gps_factor(XK(k), WK(k), kf.gps_xy[i], kf.gps_tau[i], r.gps_lever_arm,
+                                gtsam.noiseModel.Isotropic.Sigma(2, kf.gps_sigma[i])))
+        for i in range(*np.searchsorted(kf.rng_k, [k, k + 1])):
+            g.add(gf.range_factor(XK(k), WK(k), kf.rng_z[i], kf.rng_tau[i], kf.rng_beacon[i], r.range_lever_arm,
+                                  gtsam.noiseModel.Isotropic.Sigma(1, r.range_sigma)))
+        g.add(gf.motion_factor(XK(k), WK(k), XK(k + 1), kf.dt[k],
+                               gtsam.noiseModel.Diagonal.Sigmas(1.0 / prob.motion_whiten[k])))
+        Q = prob.rw_cov[k]
+        g.add(gtsam.BetweenFactorVector(WK(k), WK(k + 1), np.zeros(6),
+                                        gtsam.noiseModel.Gaussian.Covariance(Q[np.ix_(W_IDX, W_IDX)])))
+        g.add(gtsam.BetweenFactorVector(SK(k), SK(k + 1), np.zeros(2),
+                                        gtsam.noiseModel.Gaussian.Covariance(Q[np.ix_(S_IDX, S_IDX)])))
+        if prob.zero_slip[k]:
+            g.add(gf.zero_slip_factor(SK(k), gtsam.noiseModel.Isotropic.Sigma(2, pn.pseudo_slip_sigma)))
+        elif robust is not None:
+            g.add(gtsam.PriorFactorVector(SK(k), np.zeros(2), robust))
+    return g
+
+
+def _values(pose, Wv, ks):
+    import gtsam
+    from gtsam.symbol_shorthand import S as SK, W as WK, X as XK
+    from odomgraph.estimators.incremental import S_IDX, W_IDX
+    v = gtsam.Values()
+    for k in ks:
+        v.insert(XK(k), gtsam.Pose2(*pose[k]))
+        v.insert(WK(k), Wv[k, W_IDX].copy())
+        v.insert(SK(k), Wv[k, S_IDX].copy())
+    return v
+
+
+def straightforward_lm(log, schedule, options, max_iterations: int = 100):
+    """gtsam.LevenbergMarquardtOptimizer over the CustomFactor graph, from the EKF. Returns (seconds, iterations)."""
+    import time
+    import gtsam
+    from odomgraph.estimators import batch as B
+    from odomgraph.estimators.ekf import run_ekf
+    prob = B.build_problem(log, schedule, options)
+    pose, Wv = B.initial_guess(prob, run_ekf(log, schedule))
+    g = straightforward_graph(prob)
+    v = _values(pose, Wv, range(prob.kf.n))
+    params = gtsam.LevenbergMarquardtParams()
+    params.setMaxIterations(max_iterations)
+    t0 = time.perf_counter()
+    opt = gtsam.LevenbergMarquardtOptimizer(g, v, params)
+    opt.optimize()
+    return time.perf_counter() - t0, opt.iterations()
+
+
+def straightforward_isam2(log, schedule, options, time_limit: float = 600.0):
+    """One ISAM2 update per keyframe with CustomFactors. Returns (seconds, per-update times, completed)."""
+    import time
+    import gtsam
+    from factors.motion import propagate
+    from odomgraph.estimators import batch as B
+    prob = B.build_problem(log, schedule, options)
+    n = prob.kf.n
+    pose = np.zeros((n, 3))
+    Wv = np.zeros((n, 8))
+    pose[0], Wv[0] = prob.prior_mean[0:3], prob.prior_mean[3:]
+    isam = gtsam.ISAM2(gtsam.ISAM2Params())
+    isam.update(straightforward_graph(prob, 0, 0), _values(pose, Wv, [0]))
+    times = []
+    t_start = time.perf_counter()
+    for k in range(1, n):
+        t0 = time.perf_counter()
+        p, _ = propagate(*pose[k - 1], Wv[k - 1, 0], Wv[k - 1, 1], prob.kf.dt[k - 1])
+        pose[k], Wv[k] = p, Wv[k - 1]
+        isam.update(straightforward_graph(prob, k - 1, k), _values(pose, Wv, [k]))
+        est = isam.calculateEstimatePose2(gtsam.symbol_shorthand.X(k))
+        pose[k] = [est.x(), est.y(), est.theta()]
+        times.append(time.perf_counter() - t0)
+        if time.perf_counter() - t_start > time_limit:
+            return time.perf_counter() - t_start, np.array(times), False
+    return time.perf_counter() - t_start, np.array(times), True

@@ -27,6 +27,9 @@ class ScenarioName(str, Enum):
 
 class MethodName(str, Enum):
     ekf = "ekf"
+    batch = "batch"
+    isam2 = "isam2"
+    fixed_lag = "fixed-lag"
 
 
 class HoldName(str, Enum):
@@ -78,8 +81,7 @@ def _parse_schedule(calibrate_until: str, hold: HoldName):
     from odomgraph.errors import OdomgraphError
     from odomgraph.estimators.schedule import Hold, Schedule
     if calibrate_until.strip().lower() == "none":
-        raise OdomgraphError("--calibrate-until none (slip and scale together) needs a smoother; "
-                             "the EKF needs a schedule (use a number of seconds, 0 = slip only)")
+        return Schedule(calibrate_until=None, hold=Hold(hold.value))
     try:
         T = float(calibrate_until)
     except ValueError:
@@ -97,10 +99,16 @@ def _print_summary(s: dict) -> None:
     for k, v in cal.items():
         tv = f"   truth {truth[k]:.4f}" if k in truth else ""
         typer.echo(f"  {k:<12} {v['value']:.4f} ± {v['sigma']:.4f}{tv}")
-    if "errors" in s:
-        e = s["errors"]
-        slip = ", ".join(f"{w} {v:.3f}" for w, v in e["rms_slip_mps"].items())
-        typer.echo(f"  RMS position error {e['rms_position_m']:.3f} m; RMS slip error after calibration: {slip} m/s")
+    for key, label in (("errors", ""), ("errors_online", " (online)")):
+        if key in s:
+            e = s[key]
+            slip = ", ".join(f"{w} {v:.3f}" for w, v in e["rms_slip_mps"].items())
+            typer.echo(f"  RMS position error{label} {e['rms_position_m']:.3f} m; RMS slip error after calibration: "
+                       f"{slip} m/s")
+    if "update_time_ms" in s:
+        u = s["update_time_ms"]
+        typer.echo(f"  update time: mean {u['mean']:.2f} ms, first 10% {u['first_10pct']:.2f} ms, "
+                   f"last 10% {u['last_10pct']:.2f} ms")
     for n in s["notes"]:
         typer.echo(f"  note: {n}")
 
@@ -200,15 +208,28 @@ def estimate(
         help="consider: hold scale factors with zero gain, keep honest sigma (default); "
              "pseudo: the paper's literal pseudo-update (eq. 37-38).")] = HoldName.consider,
     gate: Annotated[Optional[float], typer.Option(
-        help="Reject GPS/range/velocity updates whose NIS exceeds this (e.g. 16). Default: off.")] = None,
+        help="EKF: reject GPS/range/velocity updates whose NIS exceeds this (e.g. 16). Default: off.")] = None,
+    keyframe_hz: Annotated[Optional[float], typer.Option(
+        help="Smoothers: keyframe rate [Hz] (default 5; at most the encoder rate).")] = None,
+    lag: Annotated[Optional[float], typer.Option(help="fixed-lag: window length [s] (default 5).")] = None,
+    slip_cauchy: Annotated[Optional[float], typer.Option(
+        help="Smoothers: Cauchy scale [m/s] of the sparse zero-slip prior outside the calibration window "
+             "(default 0.005).")] = None,
 ):
-    """Estimate states and odometry errors of a log; writes states.csv, trajectory.tum, summary.json."""
+    """Estimate states and odometry errors of a log; writes states.csv, trajectory.tum, summary.json
+    (and online.csv, the causal estimate, for isam2).
+
+    Methods: ekf (the paper's filter), batch (whole-log smoother), isam2 (incremental smoother),
+    fixed-lag (incremental smoother over a window). --calibrate-until none estimates slip and
+    scale factors together with a sparse slip prior (smoothers only).
+    """
     from odomgraph.io.log import read_log
     from odomgraph.pipeline import Method, estimate_to_dir
     schedule = _parse_schedule(calibrate_until, hold)
     log = read_log(log_dir)
     with _Progress(f"{method.value}") as bar:
-        s = estimate_to_dir(log, output, Method(method.value), schedule, progress=bar, gate=gate)
+        s = estimate_to_dir(log, output, Method(method.value), schedule, progress=bar, gate=gate,
+                            keyframe_hz=keyframe_hz, lag=lag, slip_cauchy=slip_cauchy)
     _print_summary(s)
     typer.echo(f"wrote {output}")
 

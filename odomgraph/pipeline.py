@@ -17,15 +17,40 @@ from odomgraph.io.log import Log
 class Method(str, Enum):
     ekf = "ekf"
     """The paper's velocity-augmented EKF."""
+    batch = "batch"
+    """Factor-graph smoother, Gauss-Newton over the whole log (GTSAM elimination)."""
+    isam2 = "isam2"
+    """Factor-graph smoother, one gtsam.ISAM2 update per keyframe."""
+    fixed_lag = "fixed-lag"
+    """Factor-graph smoother, gtsam.IncrementalFixedLagSmoother."""
 
 
 def estimate(log: Log, method: Method = Method.ekf, schedule: Schedule = Schedule(), progress=None,
              **options) -> Estimate:
-    """Run one estimator over a log. ``progress(done, total)`` is optional."""
+    """Run one estimator over a log. ``progress(done, total)`` is optional.
+
+    Options are those of the method's options dataclass (EKFOptions,
+    SmootherOptions, IncrementalOptions); None values mean the default.
+    """
+    options = {k: v for k, v in options.items() if v is not None}
     if method is Method.ekf:
         from odomgraph.estimators.ekf import EKFOptions, run_ekf
-        return run_ekf(log, schedule, EKFOptions(**options), progress)
-    raise ValueError(f"unknown method {method!r}")
+        if schedule.calibrate_until is None:
+            from odomgraph.errors import OdomgraphError
+            raise OdomgraphError("the EKF needs a schedule: --calibrate-until none (slip and scale together) "
+                                 "is for the smoothers; use a number of seconds (0 = slip only)")
+        return run_ekf(log, schedule, EKFOptions(**_only(EKFOptions, options)), progress)
+    if method is Method.batch:
+        from odomgraph.estimators.batch import SmootherOptions, run_batch
+        return run_batch(log, schedule, SmootherOptions(**_only(SmootherOptions, options)), progress)
+    from odomgraph.estimators.incremental import IncrementalOptions, run_fixed_lag, run_isam2
+    run = run_isam2 if method is Method.isam2 else run_fixed_lag
+    return run(log, schedule, IncrementalOptions(**_only(IncrementalOptions, options)), progress)
+
+
+def _only(cls, options: dict) -> dict:
+    """The options that ``cls`` takes (the CLI passes one set for every method)."""
+    return {k: v for k, v in options.items() if k in cls.__dataclass_fields__}
 
 
 def summary(est: Estimate, log: Log, schedule: Schedule) -> dict:
@@ -43,9 +68,18 @@ def summary(est: Estimate, log: Log, schedule: Schedule) -> dict:
         "nis": nis_summary(est),
         "notes": est.notes,
     }
+    if est.update_times is not None and len(est.update_times) >= 10:
+        ut = est.update_times
+        q = max(1, len(ut) // 10)
+        out["update_time_ms"] = {"mean": 1e3 * float(ut.mean()), "first_10pct": 1e3 * float(ut[:q].mean()),
+                                 "last_10pct": 1e3 * float(ut[-q:].mean()), "max": 1e3 * float(ut.max())}
     err = truth_errors(est, log)
     if err is not None:
         out["errors"] = err.as_dict()
+        if est.online is not None:
+            from dataclasses import replace
+            online_err = truth_errors(replace(est.online, t_switch=est.t_switch), log)
+            out["errors_online"] = online_err.as_dict()
         if log.truth_scales is not None:
             out["truth_scales"] = dict(zip(("scale_left", "scale_right", "scale_track"), log.truth_scales))
     return out

@@ -28,6 +28,10 @@ class SeedResult:
     coverage: dict[str, float]
     updates: int
     wall_time_s: float
+    rms_position: float = 0.0
+    """RMS 2-D position error [m]."""
+    online: "SeedResult | None" = None
+    """The same scores for the causal (online) estimate, where there is one."""
 
     @property
     def slip_rms(self) -> tuple[float, float]:
@@ -44,19 +48,31 @@ class StudySummary:
     coverage_min: dict[str, float]
     """Worst seed's fraction of rows inside +-3 sigma, per state."""
     updates_per_second: float
+    scale_rel_error_rms: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    """RMS over seeds of the final relative scale errors."""
+    rms_position: float = 0.0
+    """RMS over seeds of each seed's RMS position error [m]."""
 
-
-def _one(args) -> SeedResult:
-    scenario, seed, schedule, method = args
-    from odomgraph.pipeline import Method, estimate
-    from odomgraph.sim.simulate import simulate
-    log = simulate(scenario, seed)
-    est = estimate(log, Method(method), schedule)
+def _score(est, log, seed) -> SeedResult:
     err = truth_errors(est, log)
     post = err.slip_mask
     sq = tuple(float(np.sum(err.error_series[f"slip_{w}"][post] ** 2)) for w in ("left", "right"))
     rel = tuple(abs(err.final_scale_error[k] / t) for k, t in zip(("left", "right", "track"), log.truth_scales))
-    return SeedResult(seed, rel, sq, int(post.sum()), err.coverage_3sigma, est.n_updates, est.wall_time_s)
+    return SeedResult(seed, rel, sq, int(post.sum()), err.coverage_3sigma, est.n_updates, est.wall_time_s,
+                      err.rms_position_m)
+
+
+def _one(args) -> SeedResult:
+    scenario, seed, schedule, method = args
+    from dataclasses import replace
+    from odomgraph.pipeline import Method, estimate
+    from odomgraph.sim.simulate import simulate
+    log = simulate(scenario, seed)
+    est = estimate(log, Method(method), schedule)
+    res = _score(est, log, seed)
+    if est.online is not None:
+        res = replace(res, online=_score(replace(est.online, t_switch=est.t_switch), log, seed))
+    return res
 
 
 def run_study(scenario, seeds, schedule: Schedule | None = None, method: str = "ekf",
@@ -83,4 +99,6 @@ def summarize(results: list[SeedResult]) -> StudySummary:
         slip_rms_worst_seed=tuple(np.max([r.slip_rms for r in results], 0)),
         coverage_min={k: min(r.coverage[k] for r in results) for k in states},
         updates_per_second=sum(r.updates for r in results) / sum(r.wall_time_s for r in results),
+        scale_rel_error_rms=tuple(np.sqrt(np.mean(rel**2, 0))),
+        rms_position=float(np.sqrt(np.mean([r.rms_position**2 for r in results]))),
     )

@@ -1,0 +1,133 @@
+"""The factor-graph smoothers (batch, iSAM2, fixed-lag) on short logs:
+accuracy bounds, consistency, causality of the online estimate, and equality
+with the straightforward GTSAM design."""
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from odomgraph import state as S
+from odomgraph.analysis.metrics import truth_errors
+from odomgraph.estimators.batch import SmootherOptions, run_batch
+from odomgraph.estimators.ekf import run_ekf
+from odomgraph.estimators.incremental import IncrementalOptions, run_fixed_lag, run_isam2
+from odomgraph.estimators.schedule import Schedule
+from odomgraph.sim.scenarios import Rates, beacons_around, paper
+from odomgraph.sim.simulate import simulate
+
+CONSISTENCY = ("x", "y", "theta", "slip_left", "slip_right", "scale_left", "scale_right", "scale_track")
+
+
+@pytest.fixture(scope="module")
+def log():
+    return simulate(paper(), 5)
+
+
+@pytest.fixture(scope="module")
+def runs(log):
+    sch = Schedule(20.0)
+    return {"ekf": run_ekf(log, sch), "batch": run_batch(log, sch), "isam2": run_isam2(log, sch),
+            "fixed-lag": run_fixed_lag(log, sch)}
+
+
+@pytest.mark.parametrize("method", ["batch", "isam2", "fixed-lag"])
+def test_smoother_accuracy_and_consistency(runs, log, method):
+    err = truth_errors(runs[method], log)
+    ekf = truth_errors(runs["ekf"], log)
+    assert err.rms_position_m < 0.02
+    assert max(err.rms_slip_mps.values()) < 0.025
+    # the smoother beats the paper's filter on slip by a wide margin
+    assert max(err.rms_slip_mps.values()) < 0.7 * min(ekf.rms_slip_mps.values())
+    for k, true in zip(("left", "right", "track"), log.truth_scales):
+        assert abs(err.final_scale_error[k] / true) < 0.004
+    for name in CONSISTENCY:
+        assert err.coverage_3sigma[name] >= 0.95, (method, name, err.coverage_3sigma[name])
+    est = runs[method]
+    assert np.all(np.isfinite(est.mean)) and np.all(np.isfinite(est.sigma))
+    assert np.all(np.diff(est.t) > 0)
+    assert np.all(np.abs(est.mean[:, S.THETA]) <= np.pi)
+
+
+def test_incremental_solvers_reach_the_batch_solution(runs):
+    b = runs["batch"]
+    for m in ("isam2", "fixed-lag"):
+        e = runs[m]
+        np.testing.assert_allclose(e.t, b.t)
+        np.testing.assert_allclose(e.mean[-1, S.SCALE], b.mean[-1, S.SCALE], atol=1.5e-3)
+        assert np.sqrt(np.mean((e.mean[:, S.SLIP] - b.mean[:, S.SLIP]) ** 2)) < 0.01
+
+
+def test_isam2_online_is_no_worse_than_the_ekf(runs, log):
+    online = truth_errors(replace(runs["isam2"].online, t_switch=runs["isam2"].t_switch), log)
+    ekf = truth_errors(runs["ekf"], log)
+    for w in ("left", "right"):
+        assert online.rms_slip_mps[w] <= 1.05 * ekf.rms_slip_mps[w]
+    assert online.rms_position_m <= 1.1 * ekf.rms_position_m
+    for name in ("x", "y", "slip_left", "slip_right"):
+        assert online.coverage_3sigma[name] >= 0.95
+
+
+def test_online_estimate_never_uses_future_data(log, runs):
+    """Truncate the log at T: every online row available by T is unchanged."""
+    T = 55.0
+    short = run_isam2(log.truncated(T), Schedule(20.0))
+    full = runs["isam2"].online
+    # row j describes interval j's midpoint; it was produced when interval j ended
+    n = len(short.online.t)
+    done = short.online.t + (short.online.t - np.append(log.t_start, short.online.t[:-1])) <= T
+    m = min(n - 1, int(np.sum(done)))
+    assert m > 200
+    np.testing.assert_allclose(short.online.mean[:m], full.mean[:m], atol=1e-9)
+    np.testing.assert_allclose(short.online.sigma[:m], full.sigma[:m], atol=1e-9)
+    # ...while the smoothed estimate of the same times does change with later data
+    assert np.abs(short.mean[:m, S.SLIP] - runs["isam2"].mean[:m, S.SLIP]).max() > 1e-4
+
+
+def test_batch_equals_the_straightforward_gtsam_solution():
+    """Our vectorised Gauss-Newton and GTSAM's LM over plain CustomFactors solve
+    the same problem to the same answer (schedule only: no robust prior, whose
+    IRLS GTSAM's LM treats differently)."""
+    import gtsam
+    from benchmarks.peers import _values, straightforward_graph
+    from odomgraph.estimators import batch as B
+    log = simulate(paper(40), 2)
+    sch = Schedule(20.0)
+    opt = SmootherOptions(slip_cauchy=None)
+    prob = B.build_problem(log, sch, opt)
+    pose, W = B.initial_guess(prob, run_ekf(log, sch))
+    ours_pose, ours_W, _, _ = B.solve(prob, pose, W, opt)
+    g = straightforward_graph(prob)
+    params = gtsam.LevenbergMarquardtParams()
+    params.setRelativeErrorTol(1e-12)
+    params.setAbsoluteErrorTol(1e-12)
+    res = gtsam.LevenbergMarquardtOptimizer(g, _values(pose, W, range(prob.kf.n)), params).optimize()
+    from gtsam.symbol_shorthand import W as WK, X as XK
+    ref_scale = np.array([res.atVector(WK(k))[3:6] for k in range(prob.kf.n)])
+    ref_xy = np.array([[res.atPose2(XK(k)).x(), res.atPose2(XK(k)).y()] for k in range(prob.kf.n)])
+    np.testing.assert_allclose(ours_W[:, 5:8], ref_scale, atol=2e-6)
+    np.testing.assert_allclose(ours_pose[:, 0:2], ref_xy, atol=2e-5)
+
+
+def test_calibrate_until_none_estimates_scale_and_slip_together():
+    log = simulate(paper(), 7)
+    est = run_batch(log, Schedule(None))
+    err = truth_errors(est, log)
+    for k, true in zip(("left", "right", "track"), log.truth_scales):
+        assert abs(err.final_scale_error[k] / true) < 0.005
+    assert max(err.rms_slip_mps.values()) < 0.03
+    assert err.coverage_3sigma["scale_left"] > 0.95 and err.coverage_3sigma["scale_right"] > 0.95
+
+
+@pytest.mark.parametrize("sensors", ["ranges_gyro", "gps_only"])
+def test_smoothers_with_other_sensors(sensors):
+    sc = paper(60)
+    if sensors == "gps_only":
+        sc = sc.with_(rates=Rates(gyro=0, gps=20), slips=())
+    else:
+        sc = sc.with_(rates=Rates(gyro=25, gps=0, ranges=20),
+                      robot=sc.robot.with_(beacons=beacons_around(0, 20, -6, 12), range_sigma=0.05))
+    log = simulate(sc, 3)
+    for run in (run_batch, run_isam2):
+        err = truth_errors(run(log, Schedule(20.0)), log)
+        assert err.rms_position_m < 0.05, (sensors, run.__name__)
+        assert err.coverage_3sigma["x"] > 0.95 and err.coverage_3sigma["y"] > 0.95
