@@ -125,3 +125,31 @@ def test_help_texts():
         sub = run(cmd, "--help")
         assert sub.exit_code == 0 and "Usage" in sub.output
     assert "--calibrate-until" in run("estimate", "--help").output
+
+
+@pytest.mark.parametrize("method", ["batch", "isam2", "fixed-lag"])
+def test_smoother_methods_write_the_contract_files(tmp_path, method):
+    log = tmp_path / "log"
+    assert run("simulate", "--duration", "40", "--seed", "2", "-o", log).exit_code == 0
+    out = tmp_path / method
+    res = run("estimate", log, "--method", method, "--keyframe-hz", "5", "--lag", "3", "-o", out)
+    assert res.exit_code == 0, res.output
+    files = sorted(p.name for p in out.iterdir())
+    expected = ["states.csv", "summary.json", "trajectory.tum"] + (["online.csv"] if method == "isam2" else [])
+    assert files == sorted(expected)
+    assert (out / "states.csv").read_text().splitlines()[0].split(",") == STATE_COLUMNS
+    if method == "isam2":
+        assert (out / "online.csv").read_text().splitlines()[0].split(",") == STATE_COLUMNS
+    s = json.loads((out / "summary.json").read_text())
+    assert s["method"] == method and s["errors"]["rms_position_m"] < 0.05
+    data = np.loadtxt(out / "states.csv", delimiter=",", skiprows=1)
+    assert np.isfinite(data).all() and (data[:, 13:] >= 0).all()
+    assert s["calibration"]["scale_left"]["sigma"] > 0
+
+
+def test_calibrate_until_none_runs_for_smoothers(tmp_path, paper_log_dir):
+    res = run("estimate", paper_log_dir, "--method", "batch", "--calibrate-until", "none", "-o", tmp_path / "o")
+    assert res.exit_code == 0, res.output
+    s = json.loads((tmp_path / "o" / "summary.json").read_text())
+    assert s["schedule"]["calibrate_until"] is None
+    assert abs(s["errors"]["final_scale_error"]["left"]) < 0.005
