@@ -80,8 +80,8 @@ def straightforward_graph(prob, k0: int = 0, k1: int | None = None):
             P[3:, 3:][np.ix_(W_IDX, W_IDX)])))
         g.add(gtsam.PriorFactorVector(SK(0), m[3:][S_IDX], gtsam.noiseModel.Gaussian.Covariance(
             P[3:, 3:][np.ix_(S_IDX, S_IDX)])))
-    robust = None if prob.slip_robust is None else gtsam.noiseModel.Robust.Create(
-        gtsam.noiseModel.mEstimator.Cauchy.Create(1.0), gtsam.noiseModel.Isotropic.Sigma(2, prob.slip_robust))
+    from odomgraph.estimators.incremental import IncrementalOptions, _Graph
+    builtins = _Graph(prob, IncrementalOptions(slip_cauchy=prob.slip_robust))
     for k in range(k0, k1):
         g.add(gf.encoder_factor(WK(k), SK(k), kf.enc_m[k], gtsam.noiseModel.Diagonal.Sigmas(kf.enc_sigma[k]),
                                 r.track_width))
@@ -99,15 +99,7 @@ def straightforward_graph(prob, k0: int = 0, k1: int | None = None):
                                   gtsam.noiseModel.Isotropic.Sigma(1, r.range_sigma)))
         g.add(gf.motion_factor(XK(k), WK(k), XK(k + 1), kf.dt[k],
                                gtsam.noiseModel.Diagonal.Sigmas(1.0 / prob.motion_whiten[k])))
-        Q = prob.rw_cov[k]
-        g.add(gtsam.BetweenFactorVector(WK(k), WK(k + 1), np.zeros(6),
-                                        gtsam.noiseModel.Gaussian.Covariance(Q[np.ix_(W_IDX, W_IDX)])))
-        g.add(gtsam.BetweenFactorVector(SK(k), SK(k + 1), np.zeros(2),
-                                        gtsam.noiseModel.Gaussian.Covariance(Q[np.ix_(S_IDX, S_IDX)])))
-        if prob.zero_slip[k]:
-            g.add(gf.zero_slip_factor(SK(k), gtsam.noiseModel.Isotropic.Sigma(2, pn.pseudo_slip_sigma)))
-        elif robust is not None:
-            g.add(gtsam.PriorFactorVector(SK(k), np.zeros(2), robust))
+        g.push_back(builtins.builtin_factors(k))
     return g
 
 

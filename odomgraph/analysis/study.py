@@ -98,7 +98,8 @@ def summarize(results: list[SeedResult]) -> StudySummary:
         slip_rms_pooled=tuple(np.sqrt(sq.sum(0) / n)),
         slip_rms_worst_seed=tuple(np.max([r.slip_rms for r in results], 0)),
         coverage_min={k: min(r.coverage[k] for r in results) for k in states},
-        updates_per_second=sum(r.updates for r in results) / sum(r.wall_time_s for r in results),
+        updates_per_second=(sum(r.updates for r in results) / wall) if (wall := sum(r.wall_time_s for r in results))
+        else 0.0,
         scale_rel_error_rms=tuple(np.sqrt(np.mean(rel**2, 0))),
         rms_position=float(np.sqrt(np.mean([r.rms_position**2 for r in results]))),
     )

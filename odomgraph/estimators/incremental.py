@@ -30,8 +30,9 @@ from gtsam.symbol_shorthand import S as S_KEY
 from gtsam.symbol_shorthand import W as W_KEY
 from gtsam.symbol_shorthand import X as X_KEY
 
-from factors.motion import propagate
+from factors import pose2
 from factors._math import wrap_angle
+from factors.motion import propagate
 from odomgraph import state as St
 from odomgraph.errors import EstimatorDivergedError
 from odomgraph.estimators.batch import (SmootherOptions, build_problem, keyframe_rows, marginal_blocks,
@@ -138,8 +139,14 @@ class _Graph:
 
     def interval_factors(self, k: int, pose, W) -> gtsam.NonlinearFactorGraph:
         """All factors of interval k: linear ones first (see linear_factors), then built-ins."""
-        prob = self.prob
         g = self.linear_factors(k, pose, W)
+        g.push_back(self.builtin_factors(k))
+        return g
+
+    def builtin_factors(self, k: int) -> gtsam.NonlinearFactorGraph:
+        """Random walks of W and S from keyframe k to k+1, and the slip prior of interval k."""
+        prob = self.prob
+        g = gtsam.NonlinearFactorGraph()
         Q = prob.rw_cov[k]
         g.add(gtsam.BetweenFactorVector(W_KEY(k), W_KEY(k + 1), np.zeros(6),
                                         gtsam.noiseModel.Gaussian.Covariance(Q[np.ix_(W_IDX, W_IDX)])))
@@ -150,18 +157,6 @@ class _Graph:
         elif self.robust_model is not None:
             g.add(gtsam.PriorFactorVector(S_KEY(k), np.zeros(2), self.robust_model))
         return g
-
-
-def _read(est_fn, k: int):
-    """(pose (3,), W (8,)) of keyframe k from an estimate accessor."""
-    p = est_fn.atPose2(X_KEY(k)) if hasattr(est_fn, "atPose2") else None
-    return p
-
-
-def _predict(pose, W, k):
-    """Keyframe k+1 predicted from k: the arc of W_k, W carried over."""
-    p, _ = propagate(*pose[k], W[k, 0], W[k, 1], 0.0)
-    return p
 
 
 class _Runner:
@@ -268,7 +263,6 @@ class ISAM2Runner(_Runner):
         Pw = isam.marginalCovariance(W_KEY(k - 1))
         Ps = isam.marginalCovariance(S_KEY(k - 1))
         # pose at the midpoint: arc Jacobian on X (body) and (v, omega); cross terms ignored
-        from factors import pose2
         Jx = pose2.to_body(Jf[:, 0:3], self.pose[k - 1, 2])
         Jv = Jf[:, 3:5]
         Pp = Jx @ Px @ Jx.T + Jv @ Pw[0:2, 0:2] @ Jv.T
