@@ -241,7 +241,8 @@ def demo(
     = Path("demo-out"),
     seed: Annotated[int, typer.Option(help="Random seed of the simulation.")] = 0,
 ):
-    """Simulate the paper's scenario (sec. IV), run the EKF and draw the paper's figures 1-3."""
+    """Simulate the paper's scenario (sec. IV), run the EKF and the batch smoother, and draw the
+    paper's figures 1-3 with both on the same axes."""
     from odomgraph.analysis.plots import overview_figure
     from odomgraph.estimators.schedule import Schedule
     from odomgraph.io.estimate import write_estimate
@@ -252,18 +253,22 @@ def demo(
     from odomgraph.sim.simulate import simulate as run_sim
 
     sc = paper()
-    log = run_sim(sc, seed)
+    log = run_sim(sc, seed).with_(path=output / "log")
     schedule = Schedule(calibrate_until=sc.calibrate_until)
-    with _Progress("ekf") as bar:
-        est = run_estimate(log, Method.ekf, schedule, progress=bar)
-    s = summary(est, log, schedule)
+    results = []
+    for method in (Method.ekf, Method.batch):
+        with _Progress(method.value) as bar:
+            est = run_estimate(log, method, schedule, progress=bar)
+        results.append((est, summary(est, log, schedule)))
     with atomic_output_dir(output) as d:
         write_log(log, d / "log")
-        write_estimate(est, d / "ekf", s)
-        overview_figure([est], log, d / "figure.png",
+        for est, s in results:
+            write_estimate(est, d / est.method, s)
+        overview_figure([est for est, _ in results], log, d / "figure.png",
                         title=f"odomgraph demo: paper scenario (sec. IV), seed {seed}")
-    _print_summary(s)
-    typer.echo(f"wrote {output}/log, {output}/ekf and {output}/figure.png")
+    for _, s in results:
+        _print_summary(s)
+    typer.echo(f"wrote {output}/log, {output}/ekf, {output}/batch and {output}/figure.png")
 
 
 def main() -> None:

@@ -271,7 +271,9 @@ class ISAM2Runner(_Runner):
         self.online_sigma[k, [6, 7]] = np.sqrt(np.maximum(np.diag(Ps), 0))
 
     def finish(self) -> Estimate:
-        values = self.isam.calculateEstimate()
+        # Full back-substitution: the wildfire threshold (1e-3) would leave older
+        # keyframes with scale-factor copies that are stale by up to 1e-3.
+        values = self.isam.calculateBestEstimate()
         for k in range(self.prob.kf.n):
             self._store(k, values)
         Sig = marginal_blocks(self.prob, self.pose, self.W)
