@@ -58,6 +58,14 @@ class IncrementalOptions(SmootherOptions):
     relinearize_threshold: float = 0.05
     """ISAM2 relinearisation threshold of pose [m, rad] and velocity [m/s, rad/s]
     (built-in factors); bias, scale and slip thresholds are scaled from it."""
+    segment: float = 300.0
+    """isam2: length [s] of one ISAM2 instance's history (0: one ISAM2 for the
+    whole log). GTSAM 4.3's Bayes-tree destructor walks the whole tree on every
+    update (benchmarks/README.md), so one long-lived ISAM2 costs O(n) per
+    update. Each segment hands over to a fresh ISAM2 seeded with the joint
+    marginal of the boundary keyframe; at the end, every earlier segment
+    receives what the later data says about its boundary, which recovers the
+    full smoothed estimate. The online estimate is unchanged by this."""
     relinearize_after: float = 2.0
     """Age [s] at which an interval's linear factors are linearised again, at
     the by then nearly final estimate (they were first linearised at a
@@ -221,6 +229,8 @@ class ISAM2Runner(_Runner):
         self.isam.update(factors, values)
         self.linear_index: dict[int, list[int]] = {}
         self._relin_next = 0
+        self.seg_start = 0
+        self.segments: list[dict] = []
         self.online = np.zeros((self.prob.kf.n, St.N))
         self.online_sigma = np.zeros((self.prob.kf.n, St.N))
 
@@ -269,20 +279,96 @@ class ISAM2Runner(_Runner):
         self.online_sigma[k, 0:3] = np.sqrt(np.maximum(np.diag(Pp), 0))
         self.online_sigma[k, [3, 4, 5, 8, 9, 10]] = np.sqrt(np.maximum(np.diag(Pw), 0))
         self.online_sigma[k, [6, 7]] = np.sqrt(np.maximum(np.diag(Ps), 0))
+        seg = self.options.segment
+        if seg > 0 and kf.t[k] - kf.t[self.seg_start] >= seg and k < kf.n - 1:
+            self._hand_over(k)
+
+    # -------------------------------------------------------- segmentation
+    def _boundary(self, isam, b):
+        """(values of X_b, W_b, S_b; their joint covariance (11, 11), tangent order X, W, S)."""
+        keys = [X_KEY(b), W_KEY(b), S_KEY(b)]
+        jm = isam.jointMarginalCovariance(keys)
+        dims = (3, 6, 2)
+        off = np.cumsum((0,) + dims)
+        C = np.zeros((11, 11))
+        for a, ka in enumerate(keys):
+            for c, kc in enumerate(keys):
+                C[off[a]:off[a + 1], off[c]:off[c + 1]] = jm.at(ka, kc)
+        vals = gtsam.Values()
+        vals.insert(X_KEY(b), isam.calculateEstimatePose2(X_KEY(b)))
+        vals.insert(W_KEY(b), isam.calculateEstimateVector(W_KEY(b)))
+        vals.insert(S_KEY(b), isam.calculateEstimateVector(S_KEY(b)))
+        return vals, 0.5 * (C + C.T)
+
+    @staticmethod
+    def _information_factor(vals, Lam, eta):
+        """LinearContainerFactor of 0.5 d^T Lam d - eta^T d on (X_b, W_b, S_b) at ``vals``."""
+        keys = list(vals.keys())
+        keys = [k for c in ("x", "w", "s") for k in keys if chr(gtsam.Symbol(k).chr()) == c]
+        d, V = np.linalg.eigh(0.5 * (Lam + Lam.T))
+        keep = d > 1e-9 * max(d.max(), 1e-300)
+        A = np.sqrt(d[keep])[:, None] * V[:, keep].T
+        b = (V[:, keep].T @ eta) / np.sqrt(d[keep])
+        jf = gtsam.JacobianFactor(keys[0], A[:, 0:3], keys[1], A[:, 3:9], keys[2], A[:, 9:11], b,
+                                  gtsam.noiseModel.Unit.Create(len(b)))
+        g = gtsam.NonlinearFactorGraph()
+        g.add(gtsam.LinearContainerFactor(jf, vals))
+        return g
+
+    def _hand_over(self, b):
+        """Close the current ISAM2 at keyframe b and continue in a fresh one seeded at b."""
+        kf = self.prob.kf
+        # Settle the pending relinearisations while their factors are still here.
+        remove, extra = [], gtsam.NonlinearFactorGraph()
+        for j in range(self._relin_next, b):
+            fs = self.graph.linear_factors(j, self.pose, self.W)
+            remove += self.linear_index.pop(j, [])
+            for i in range(fs.size()):
+                extra.add(fs.at(i))
+        if extra.size():
+            self.isam.update(extra, gtsam.Values(), remove)
+        vals, cov = self._boundary(self.isam, b)
+        self.segments.append({"isam": self.isam, "k0": self.seg_start, "b": b, "vals": vals, "cov": cov})
+        new = gtsam.ISAM2(_params(self.options, reuse_slots=True))
+        new.update(self._information_factor(vals, np.linalg.inv(cov), np.zeros(11)), gtsam.Values(vals))
+        self.isam = new
+        self.linear_index = {}
+        self._relin_next = b
+        self.seg_start = b
 
     def finish(self) -> Estimate:
         # Full back-substitution: the wildfire threshold (1e-3) would leave older
         # keyframes with scale-factor copies that are stale by up to 1e-3.
         values = self.isam.calculateBestEstimate()
-        for k in range(self.prob.kf.n):
+        for k in range(self.seg_start, self.prob.kf.n):
             self._store(k, values)
+        later = self.isam
+        # Backward pass over the segments: the later data's information about
+        # each boundary, Sigma_final^-1 - Sigma_handoff^-1 (at the handoff
+        # point), is exactly what the earlier segment has not seen.
+        for seg in reversed(self.segments):
+            b, vals, cov_h = seg["b"], seg["vals"], seg["cov"]
+            fin_vals, cov_f = self._boundary(later, b)
+            delta = np.concatenate([
+                vals.atPose2(X_KEY(b)).localCoordinates(fin_vals.atPose2(X_KEY(b))),
+                fin_vals.atVector(W_KEY(b)) - vals.atVector(W_KEY(b)),
+                fin_vals.atVector(S_KEY(b)) - vals.atVector(S_KEY(b))])
+            inf_f = np.linalg.inv(cov_f)
+            isam = seg["isam"]
+            isam.update(self._information_factor(vals, inf_f - np.linalg.inv(cov_h), inf_f @ delta),
+                        gtsam.Values())
+            values = isam.calculateBestEstimate()
+            for k in range(seg["k0"], b):
+                self._store(k, values)
+            later = isam
         Sig = marginal_blocks(self.prob, self.pose, self.W)
         est = keyframe_rows(self.prob, self.pose, self.W, Sig, "isam2")
         est.calibration_sigma = np.sqrt(np.diagonal(Sig[-1])[8:11])
         kf = self.prob.kf
         online = Estimate("isam2-online", kf.t[:-1] + 0.5 * kf.dt, self.online[1:], self.online_sigma[1:])
         est.online = online
-        est.notes = [f"isam2: {kf.n} keyframes at {self.options.keyframe_hz:g} Hz, one ISAM2 update each"]
+        est.notes = [f"isam2: {kf.n} keyframes at {self.options.keyframe_hz:g} Hz, one ISAM2 update each, "
+                     f"{len(self.segments) + 1} segment(s)"]
         return est
 
 
