@@ -32,6 +32,11 @@ class MethodName(str, Enum):
     fixed_lag = "fixed-lag"
 
 
+class ImportKind(str, Enum):
+    optiodom = "optiodom"
+    librsf = "librsf"
+
+
 class HoldName(str, Enum):
     consider = "consider"
     pseudo = "pseudo"
@@ -269,6 +274,32 @@ def demo(
     for _, s in results:
         _print_summary(s)
     typer.echo(f"wrote {output}/log, {output}/ekf, {output}/batch and {output}/figure.png")
+
+
+@app.command("import")
+@_user_errors
+def import_(
+    kind: Annotated[ImportKind, typer.Argument(help="optiodom: an OptiOdom run CSV; librsf: a libRSF *_Input.txt.")],
+    source: Annotated[Path, typer.Argument(help="The file to import.")],
+    output: Annotated[Path, typer.Option("--output", "-o", help="Log directory to write.")],
+    metadata: Annotated[Optional[Path], typer.Option(
+        help="optiodom: the session's *_metadata.csv (default: the one beside SOURCE).")] = None,
+    fixes_hz: Annotated[float, typer.Option(
+        help="optiodom: also write motion capture as gps.csv at this rate [Hz] (0: no).")] = 0.0,
+    fix_sigma: Annotated[float, typer.Option(help="optiodom: 1-sigma of those fixes [m].")] = 0.01,
+    ground_truth: Annotated[Optional[Path], typer.Option(
+        help="librsf: the ground-truth file (default: *_GT.txt beside SOURCE).")] = None,
+):
+    """Convert another dataset's files into a log directory (LOG_FORMAT.md)."""
+    from odomgraph.io.log import write_log
+    if kind is ImportKind.optiodom:
+        from odomgraph.io.importers.optiodom import import_optiodom
+        log = import_optiodom(source, metadata, fixes_hz, fix_sigma)
+    else:
+        from odomgraph.io.importers.librsf import import_librsf
+        log = import_librsf(source, ground_truth)
+    write_log(log, output)
+    typer.echo(f"wrote {output} ({'; '.join(log.notes)})")
 
 
 def main() -> None:

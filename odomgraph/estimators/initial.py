@@ -127,7 +127,9 @@ def initial_state(robot: RobotConfig, meas: Measurements) -> InitialState:
         for k in range(i + 1, len(ft)):
             d = fp[k] - fp[i]
             dist = float(np.hypot(*d))
-            if dist < max(1.0, 20.0 * max(fs[i], fs[k])):
+            # Far enough for the chord to give a heading: 5 fix sigmas (the
+            # heading sigma below says how good it is), at least 0.5 m.
+            if dist < max(0.5, 5.0 * max(fs[i], fs[k])):
                 continue
             turn = _integral(tw, ww, ft[i], ft[k])
             if abs(turn) > _MAX_TURN:

@@ -1,0 +1,96 @@
+"""libRSF text datasets (TU Chemnitz; the Labyrinth UWB set is CC BY-SA 4.0).
+
+Each line is one measurement, selected by its first word:
+
+    range2    t range cov anchor_x anchor_y anchor_id snr
+    odom2diff t v_right v_left v_y track cov_right cov_left cov_y
+    point2    t x y ...                                  (ground truth file)
+
+Wheel speeds become wheel_speeds.csv (already in m/s: nominal ticks per metre
+are set to 1), ranges become ranges.csv with the anchors as beacons, and
+point2 lines become truth.csv.
+"""
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from odomgraph.errors import LogFormatError
+from odomgraph.io.log import Log, Ranges, Truth, WheelSpeeds
+from odomgraph.io.robot import Beacon, RobotConfig
+
+
+def _lines(path: Path):
+    if not path.is_file():
+        raise LogFormatError(path, "file is missing")
+    for lineno, raw in enumerate(path.read_text(encoding="utf-8").splitlines(), start=1):
+        parts = raw.split()
+        if parts:
+            yield lineno, parts
+
+
+def _floats(path, lineno, parts, n):
+    if len(parts) < n + 1:
+        raise LogFormatError(path, f"'{parts[0]}' needs {n} values, found {len(parts) - 1}", lineno)
+    try:
+        vals = [float(v) for v in parts[1:n + 1]]
+    except ValueError:
+        raise LogFormatError(path, f"'{parts[0]}' has a value that is not a number", lineno) from None
+    if not np.all(np.isfinite(vals)):
+        raise LogFormatError(path, f"'{parts[0]}' has a non-finite value", lineno)
+    return vals
+
+
+def import_librsf(input_txt: Path | str, gt_txt: Path | str | None = None) -> Log:
+    """Import a libRSF input file (and its ground truth, default: *_GT.txt beside it)."""
+    input_txt = Path(input_txt)
+    odo, rng, anchors = [], [], {}
+    for lineno, parts in _lines(input_txt):
+        kind = parts[0]
+        if kind == "odom2diff":
+            t, vr, vl, _vy, track, cr, cl = _floats(input_txt, lineno, parts, 7)
+            odo.append((t, vl, vr, track, cl, cr))
+        elif kind == "range2":
+            t, r, cov, ax, ay, aid = _floats(input_txt, lineno, parts, 6)
+            key = str(int(aid)) if aid == int(aid) else str(aid)
+            if key in anchors and np.hypot(anchors[key][0] - ax, anchors[key][1] - ay) > 1e-6:
+                raise LogFormatError(input_txt, f"anchor {key} moved from {anchors[key]} to ({ax}, {ay})", lineno)
+            anchors[key] = (ax, ay)
+            rng.append((t, key, r, cov))
+        else:
+            raise LogFormatError(input_txt, f"unknown measurement type '{kind}'", lineno)
+    if not odo:
+        raise LogFormatError(input_txt, "no odom2diff lines: the log needs wheel speeds")
+    o = np.array([row for row in odo])
+    if (np.diff(o[:, 0]) <= 0).any():
+        raise LogFormatError(input_txt, "odom2diff time does not increase")
+    beacons = tuple(Beacon(k, xy[0], xy[1]) for k, xy in sorted(anchors.items()))
+    index = {b.id: i for i, b in enumerate(beacons)}
+    ranges = None
+    if rng:
+        t = np.array([r[0] for r in rng])
+        if (np.diff(t) <= 0).any():
+            raise LogFormatError(input_txt, "range2 time does not increase")
+        ranges = Ranges(t, np.array([index[r[1]] for r in rng]), np.array([r[2] for r in rng]))
+    robot = RobotConfig(
+        ticks_per_meter_left=1.0, ticks_per_meter_right=1.0,       # speeds are already in m/s
+        track_width=float(np.median(o[:, 3])),
+        encoder_sigma=(float(np.sqrt(np.median(o[:, 4:6]))), 0.0),
+        range_sigma=float(np.sqrt(np.median([r[3] for r in rng]))) if rng else 0.05,
+        beacons=beacons,
+    )
+    truth = None
+    if gt_txt is None:
+        cand = input_txt.with_name(input_txt.name.replace("_Input", "_GT"))
+        gt_txt = cand if cand.is_file() and cand != input_txt else None
+    if gt_txt is not None:
+        gt_txt = Path(gt_txt)
+        pts = [_floats(gt_txt, ln, p, 3) for ln, p in _lines(gt_txt) if p[0] == "point2"]
+        if pts:
+            g = np.array(pts)
+            keep = np.concatenate([[True], np.diff(g[:, 0]) > 0])
+            truth = Truth(g[keep, 0], {"x": g[keep, 1], "y": g[keep, 2]})
+    notes = (f"imported from libRSF {input_txt.name} (CC BY-SA 4.0, T. Pfeifer, TU Chemnitz)",)
+    return Log(robot=robot, wheel_speeds=WheelSpeeds(o[:, 0], o[:, 1], o[:, 2]), ranges=ranges, truth=truth,
+               notes=notes)

@@ -1,0 +1,85 @@
+"""Importers on the shipped real data, and the estimators on what they import."""
+from pathlib import Path
+
+import numpy as np
+import pytest
+from typer.testing import CliRunner
+
+from factors.motion import propagate
+from odomgraph.analysis.metrics import truth_errors
+from odomgraph.cli import app
+from odomgraph.errors import LogFormatError
+from odomgraph.estimators.schedule import Schedule
+from odomgraph.io.importers.librsf import import_librsf
+from odomgraph.io.importers.optiodom import import_optiodom
+from odomgraph.io.log import read_log
+from odomgraph.pipeline import Method, estimate
+
+DATA = Path(__file__).parent / "data"
+OPTI = DATA / "optiodom" / "231220200029_run-01.csv"
+RSF = DATA / "librsf" / "Indoor_UWB_Input.txt"
+
+
+def test_optiodom_import(tmp_path):
+    res = CliRunner().invoke(app, ["import", "optiodom", str(OPTI), "--fixes-hz", "1", "-o", str(tmp_path / "log")])
+    assert res.exit_code == 0, res.output
+    log = read_log(tmp_path / "log")
+    # nominal ticks per metre = ngear * encRes / (pi D) = 43.7 * 64 / (pi * 0.084)
+    assert log.robot.ticks_per_meter_left == pytest.approx(10598.2, abs=0.1)
+    assert log.robot.track_width == 0.2
+    raw = np.loadtxt(OPTI, delimiter=",")
+    np.testing.assert_array_equal(log.encoders.ticks_right, raw[:, 4])
+    np.testing.assert_array_equal(log.encoders.ticks_left, raw[:, 5])
+    assert np.all(np.abs(log.truth.values["theta"]) <= np.pi)
+    assert np.median(np.diff(log.gps.t)) == pytest.approx(1.0)
+    assert log.robot.initial is not None
+
+
+def test_optiodom_smoothed_and_filtered_on_real_data():
+    log = import_optiodom(OPTI, fixes_hz=1.0)
+    for method in (Method.ekf, Method.batch):
+        est = estimate(log, method, Schedule(0.0 if method is Method.ekf else None))
+        err = truth_errors(est, log)
+        assert err.rms_position_m < 0.02, (method, err.rms_position_m)
+        assert err.coverage_3sigma["x"] > 0.9 and err.coverage_3sigma["y"] > 0.9
+
+
+def _dead_reckoning_rms(log, est):
+    """Nominal wheel odometry from the estimator's first pose (taken from truth)."""
+    w = log.wheel_speeds
+    t0 = est.t[0]
+    k = np.searchsorted(w.t, t0)
+    pose = np.array([log.truth.at("x", [t0])[0], log.truth.at("y", [t0])[0], 0.0])
+    # heading from the truth path's direction over the first second of motion
+    dx = log.truth.at("x", [t0 + 1.0])[0] - pose[0]
+    dy = log.truth.at("y", [t0 + 1.0])[0] - pose[1]
+    pose[2] = np.arctan2(dy, dx)
+    path = []
+    for i in range(k, len(w.t) - 1):
+        v = 0.5 * (w.v_left[i] + w.v_right[i])
+        om = (w.v_right[i] - w.v_left[i]) / log.robot.track_width
+        p, _ = propagate(*pose, v, om, w.t[i + 1] - w.t[i])
+        pose = p
+        path.append((w.t[i + 1], p[0], p[1]))
+    path = np.array(path)
+    ex = path[:, 1] - log.truth.at("x", path[:, 0])
+    ey = path[:, 2] - log.truth.at("y", path[:, 0])
+    return float(np.sqrt(np.mean(ex**2 + ey**2)))
+
+
+def test_librsf_uwb_smoother_beats_dead_reckoning():
+    log = import_librsf(RSF)
+    assert [b.id for b in log.robot.beacons] == ["105", "107", "108", "109"]
+    assert log.robot.track_width == pytest.approx(0.0785)
+    est = estimate(log, Method.batch, Schedule(0.0))
+    err = truth_errors(est, log)
+    dr = _dead_reckoning_rms(log, est)
+    assert err.rms_position_m < 0.25
+    assert err.rms_position_m < dr, (err.rms_position_m, dr)
+
+
+def test_librsf_bad_line(tmp_path):
+    p = tmp_path / "x_Input.txt"
+    p.write_text("odom2diff 0.1 0 0 0 0.0785 0.0001 0.0001 0.0001\nrange2 0.2 abc 0.01 0 0 105 0\n")
+    with pytest.raises(LogFormatError, match=r"x_Input.txt:2: 'range2' has a value that is not a number"):
+        import_librsf(p)
