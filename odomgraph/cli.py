@@ -276,6 +276,48 @@ def demo(
     typer.echo(f"wrote {output}/log, {output}/ekf, {output}/batch and {output}/figure.png")
 
 
+@app.command()
+@_user_errors
+def calibrate(
+    log_dir: Annotated[Path, typer.Argument(metavar="LOG", help="A calibration log (LOG_FORMAT.md).")],
+    output: Annotated[Path, typer.Option("--output", "-o", help="robot.toml to write.")]
+    = Path("robot-calibrated.toml"),
+    method: Annotated[MethodName, typer.Option(help="Estimator (a smoother; ekf works too).")] = MethodName.batch,
+    calibrate_until: Annotated[str, typer.Option(
+        help="'none' (default): slip and scale together with a sparse slip prior; or seconds of "
+             "slip-free driving at the start.")] = "none",
+):
+    """Estimate corrected ticks per metre and track width from a calibration log and write them
+    (with their 1-sigma) as a robot.toml. Run it once after changing tyres."""
+    import os
+    import tempfile
+    from odomgraph.io.log import read_log
+    from odomgraph.io.robot import robot_toml
+    from odomgraph.pipeline import Method, calibrate as run_calibration
+    schedule = _parse_schedule(calibrate_until, HoldName.consider)
+    log = read_log(log_dir)
+    with _Progress(f"calibrate ({method.value})") as bar:
+        new, rep = run_calibration(log, schedule, Method(method.value), progress=bar)
+    extra = {"calibration": {
+        "from_log": str(log_dir), "method": rep["method"],
+        "ticks_per_meter_left_sigma": rep["ticks_per_meter_left"]["sigma"],
+        "ticks_per_meter_right_sigma": rep["ticks_per_meter_right"]["sigma"],
+        "track_width_sigma": rep["track_width"]["sigma"]}}
+    fd, tmp = tempfile.mkstemp(prefix=f".{output.name}.", dir=output.parent if str(output.parent) else ".")
+    with os.fdopen(fd, "w", encoding="utf-8") as fh:
+        fh.write(robot_toml(new, extra))
+    os.replace(tmp, output)
+    r = log.robot
+    for key, old in (("ticks_per_meter_left", r.ticks_per_meter_left),
+                     ("ticks_per_meter_right", r.ticks_per_meter_right), ("track_width", r.track_width)):
+        v = rep[key]
+        typer.echo(f"{key:<22} {old:.6g} -> {v['value']:.6g} ± {v['sigma']:.2g}")
+    a, b = rep["dead_reckoning_nominal"], rep["dead_reckoning_calibrated"]
+    typer.echo(f"dead reckoning on this log (vs {rep['reference']}): RMS {a['rms_m']:.3f} -> {b['rms_m']:.3f} m, "
+               f"final {a['final_m']:.3f} -> {b['final_m']:.3f} m")
+    typer.echo(f"wrote {output}")
+
+
 @app.command("import")
 @_user_errors
 def import_(

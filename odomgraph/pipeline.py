@@ -92,3 +92,46 @@ def estimate_to_dir(log: Log, out: Path, method: Method, schedule: Schedule, pro
     summ = summary(est, log, schedule)
     write_estimate(est, out, summ)
     return summ
+
+
+def calibrate(log: Log, schedule: Schedule = Schedule(calibrate_until=None), method: Method = Method.batch,
+              progress=None, **options):
+    """Calibrated robot parameters from a calibration log.
+
+    Runs the smoother (by default with a sparse slip prior over the whole log)
+    and turns its scale factors into corrected ticks per metre and track width
+    (LOG_FORMAT: true = scale x nominal). Returns (RobotConfig, report dict):
+    the report holds the parameters with their 1-sigma and, when the log has
+    truth, how dead reckoning on this log changes with the new parameters.
+    """
+    from odomgraph.analysis.deadreckoning import dead_reckon
+    est = estimate(log, method, schedule, progress, **options)
+    cal = est.calibration
+    r = log.robot
+    k = [cal[n]["value"] for n in ("scale_left", "scale_right", "scale_track")]
+    sk = [cal[n]["sigma"] for n in ("scale_left", "scale_right", "scale_track")]
+    new = r.with_(ticks_per_meter_left=k[0] * r.ticks_per_meter_left,
+                  ticks_per_meter_right=k[1] * r.ticks_per_meter_right,
+                  track_width=k[2] * r.track_width)
+    report = {
+        "method": est.method,
+        "scale": dict(zip(("left", "right", "track"), k)),
+        "ticks_per_meter_left": {"value": new.ticks_per_meter_left, "sigma": sk[0] * r.ticks_per_meter_left},
+        "ticks_per_meter_right": {"value": new.ticks_per_meter_right, "sigma": sk[1] * r.ticks_per_meter_right},
+        "track_width": {"value": new.track_width, "sigma": sk[2] * r.track_width},
+    }
+    # Dead reckoning on this log, against truth or else the smoother's own path.
+    import numpy as np
+    from odomgraph import state as S
+    start = (est.t[0], *est.mean[0, 0:3])
+    if log.truth is not None:
+        ref = lambda t: (log.truth.at("x", t), log.truth.at("y", t))
+    else:
+        ref = lambda t: (np.interp(t, est.t, est.mean[:, S.X]), np.interp(t, est.t, est.mean[:, S.Y]))
+    for name, sc in (("nominal", (1.0, 1.0, 1.0)), ("calibrated", k)):
+        t, p = dead_reckon(log, sc, start)
+        rx, ry = ref(t)
+        e = np.hypot(p[:, 0] - rx, p[:, 1] - ry)
+        report[f"dead_reckoning_{name}"] = {"rms_m": float(np.sqrt(np.mean(e**2))), "final_m": float(e[-1])}
+    report["reference"] = "truth" if log.truth is not None else "smoothed estimate"
+    return new, report

@@ -153,3 +153,22 @@ def test_calibrate_until_none_runs_for_smoothers(tmp_path, paper_log_dir):
     s = json.loads((tmp_path / "o" / "summary.json").read_text())
     assert s["schedule"]["calibrate_until"] is None
     assert abs(s["errors"]["final_scale_error"]["left"]) < 0.005
+
+
+def test_calibrate_recovers_the_parameters_and_helps_dead_reckoning(tmp_path):
+    from odomgraph.io.robot import load_robot
+    log = tmp_path / "log"
+    assert run("simulate", "--no-slip", "--duration", "90", "--seed", "4", "-o", log).exit_code == 0
+    out = tmp_path / "robot-calibrated.toml"
+    res = run("calibrate", log, "-o", out)
+    assert res.exit_code == 0, res.output
+    cal = load_robot(out)
+    # paper scenario truth: scales 1.03, 0.98, 1.04 on 2000 ticks/m and a 0.6 m track
+    assert cal.ticks_per_meter_left == pytest.approx(2060.0, rel=0.003)
+    assert cal.ticks_per_meter_right == pytest.approx(1960.0, rel=0.003)
+    assert cal.track_width == pytest.approx(0.624, rel=0.005)
+    text = out.read_text()
+    assert "[calibration]" in text and "track_width_sigma" in text
+    line = [ln for ln in res.output.splitlines() if ln.startswith("dead reckoning")][0]
+    rms = [float(x) for x in line.split("RMS ")[1].split(" m")[0].split(" -> ")]
+    assert rms[1] < 0.2 * rms[0]

@@ -127,9 +127,12 @@ def initial_state(robot: RobotConfig, meas: Measurements) -> InitialState:
         for k in range(i + 1, len(ft)):
             d = fp[k] - fp[i]
             dist = float(np.hypot(*d))
-            # Far enough for the chord to give a heading: 5 fix sigmas (the
-            # heading sigma below says how good it is), at least 0.5 m.
-            if dist < max(0.5, 5.0 * max(fs[i], fs[k])):
+            # Far enough for the chord to give a good heading (the heading sigma
+            # below says how good). GPS is used outdoors with room to drive:
+            # wait for 1 m and 20 fix sigmas. Ranges are used indoors, where a
+            # labyrinth rarely offers a straight metre: 0.5 m and 5 sigmas.
+            d_min, n_sig = (1.0, 20.0) if source == "GPS" else (0.5, 5.0)
+            if dist < max(d_min, n_sig * max(fs[i], fs[k])):
                 continue
             turn = _integral(tw, ww, ft[i], ft[k])
             if abs(turn) > _MAX_TURN:

@@ -238,8 +238,11 @@ def dump_toml(tables: dict[str, dict]) -> str:
     return "\n".join(out)
 
 
-def robot_toml(cfg: RobotConfig) -> str:
-    """robot.toml text for ``cfg``; ``load_robot`` reads it back to an equal config."""
+def robot_toml(cfg: RobotConfig, extra: dict[str, dict] | None = None) -> str:
+    """robot.toml text for ``cfg``; ``load_robot`` reads it back to an equal config.
+
+    ``extra`` tables (e.g. a [calibration] record) are appended; readers ignore them.
+    """
     tables = {
         "wheels": {"ticks_per_meter_left": cfg.ticks_per_meter_left,
                    "ticks_per_meter_right": cfg.ticks_per_meter_right,
@@ -258,4 +261,5 @@ def robot_toml(cfg: RobotConfig) -> str:
     if cfg.process != ProcessNoise():
         tables["process"] = {k: getattr(cfg.process, k) for k in cfg.process.__dataclass_fields__
                              if getattr(cfg.process, k) is not None}
+    tables.update(extra or {})
     return dump_toml(tables)
