@@ -12,8 +12,6 @@ import argparse
 import multiprocessing as mp
 import resource
 
-import numpy as np
-
 from benchmarks._common import RESULTS, save
 
 

@@ -317,7 +317,6 @@ class ISAM2Runner(_Runner):
 
     def _hand_over(self, b):
         """Close the current ISAM2 at keyframe b and continue in a fresh one seeded at b."""
-        kf = self.prob.kf
         # Settle the pending relinearisations while their factors are still here.
         remove, extra = [], gtsam.NonlinearFactorGraph()
         for j in range(self._relin_next, b):
