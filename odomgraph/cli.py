@@ -32,6 +32,11 @@ class MethodName(str, Enum):
     fixed_lag = "fixed-lag"
 
 
+class RobustName(str, Enum):
+    huber = "huber"
+    cauchy = "cauchy"
+
+
 class ImportKind(str, Enum):
     optiodom = "optiodom"
     librsf = "librsf"
@@ -220,6 +225,11 @@ def estimate(
     slip_cauchy: Annotated[Optional[float], typer.Option(
         help="Smoothers: Cauchy scale [m/s] of the sparse zero-slip prior outside the calibration window "
              "(default 0.005).")] = None,
+    robust: Annotated[Optional[RobustName], typer.Option(
+        help="Smoothers: robust loss for GPS fixes and ranges (real data has outliers). Default: Gaussian.")]
+    = None,
+    robust_k: Annotated[Optional[float], typer.Option(
+        help="Threshold of the robust loss in sigmas (default: 1.345 Huber, 2.385 Cauchy).")] = None,
 ):
     """Estimate states and odometry errors of a log; writes states.csv, trajectory.tum, summary.json
     (and online.csv, the causal estimate, for isam2).
@@ -234,7 +244,8 @@ def estimate(
     log = read_log(log_dir)
     with _Progress(f"{method.value}") as bar:
         s = estimate_to_dir(log, output, Method(method.value), schedule, progress=bar, gate=gate,
-                            keyframe_hz=keyframe_hz, lag=lag, slip_cauchy=slip_cauchy)
+                            keyframe_hz=keyframe_hz, lag=lag, slip_cauchy=slip_cauchy,
+                            robust=robust.value if robust else None, robust_k=robust_k)
     _print_summary(s)
     typer.echo(f"wrote {output}")
 

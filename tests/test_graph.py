@@ -72,3 +72,23 @@ def test_robust_slip_rows_have_the_gradient_of_the_cauchy_cost():
         A1, A2, b = B._factor_arrays(prob, lin)
         grad = -(A1[k][:, j] @ b[k]) - (A2[k - 1][:, j] @ b[k - 1])
         assert grad == pytest.approx(grad_num, rel=1e-4, abs=1e-6)
+
+
+@pytest.mark.parametrize("kind", ["huber", "cauchy"])
+def test_robust_measurement_rows_have_the_gradient_of_their_loss(kind):
+    sc = paper(30).with_(rates=Rates(gps=20, ranges=5))
+    sc = sc.with_(robot=sc.robot.with_(beacons=beacons_around(0, 15, -5, 5)))
+    log = simulate(sc, 1)
+    prob = B.build_problem(log, Schedule(10.0), B.SmootherOptions(slip_cauchy=None, robust=kind, robust_k=1.0))
+    from odomgraph.estimators.ekf import run_ekf
+    pose, W = B.initial_guess(prob, run_ekf(log, Schedule(10.0)))
+    pose = pose + np.random.default_rng(5).normal(0, [0.1, 0.1, 0.03], pose.shape)  # many rows beyond k
+    lin = linearize(prob, pose, W)
+    A1, A2, b = B._factor_arrays(prob, lin)
+    for k in (5, 60):
+        for j in (0, 1, 2, 3):
+            d = np.zeros((prob.kf.n, NB))
+            d[k, j] = 1e-7
+            num = (linearize(prob, *B.retract(pose, W, d)).cost - linearize(prob, *B.retract(pose, W, -d)).cost) / 2e-7
+            grad = -(A1[k][:, j] @ b[k]) - (A2[k - 1][:, j] @ b[k - 1])
+            assert grad == pytest.approx(num, rel=1e-4, abs=1e-5)

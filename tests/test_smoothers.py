@@ -150,3 +150,17 @@ def test_segmented_isam2_keeps_the_online_estimate_and_the_smoothed_solution(log
     assert max(err.rms_slip_mps.values()) < 0.025
     for name in CONSISTENCY:
         assert err.coverage_3sigma[name] >= 0.95
+
+
+def test_robust_gps_survives_gross_outliers(log):
+    from odomgraph.io.log import Gps
+    g = log.gps
+    x = g.x.copy()
+    x[::50] += 8.0                       # 2 % gross errors of 8 m (160 sigma)
+    bad = log.with_(gps=Gps(g.t, x, g.y))
+    plain = truth_errors(run_batch(bad, Schedule(20.0)), bad)
+    robust = truth_errors(run_batch(bad, Schedule(20.0), SmootherOptions(robust="cauchy")), bad)
+    clean = truth_errors(run_batch(log, Schedule(20.0)), log)
+    assert plain.rms_position_m > 3 * clean.rms_position_m
+    assert robust.rms_position_m < 1.3 * clean.rms_position_m
+    assert max(robust.rms_slip_mps.values()) < 0.03

@@ -41,6 +41,10 @@ class SmootherOptions:
     max_iterations: int = 50
     rel_tol: float = 1e-7
     """Stop when the cost decreases by less than this fraction."""
+    robust: str | None = None
+    """Robust loss of GPS fixes and ranges: "huber", "cauchy" or None (Gaussian)."""
+    robust_k: float | None = None
+    """Its threshold in sigmas (None: the loss's 95 %-efficiency default)."""
     slip_cauchy: float | None = 0.005
     """Cauchy scale [m/s] of the sparse zero-slip prior outside the calibration
     window (the whole log with ``calibrate_until=None``). None: no prior there,
@@ -74,7 +78,8 @@ def build_problem(log: Log, schedule: Schedule, options: SmootherOptions) -> Pro
     else:
         zero = mid < meas.t_start + schedule.calibrate_until
     robust = options.slip_cauchy
-    return Problem(kf, log.robot, mean, cov, zero, robust, slip_noise(log.robot, meas))
+    return Problem(kf, log.robot, mean, cov, zero, robust, slip_noise(log.robot, meas), options.robust,
+                   options.robust_k)
 
 
 def initial_guess(prob: Problem, ekf: Estimate) -> tuple[np.ndarray, np.ndarray]:

@@ -108,7 +108,7 @@ class _Graph:
             gtsam.noiseModel.mEstimator.Cauchy.Create(1.0), gtsam.noiseModel.Isotropic.Sigma(2, c))
         # The numpy linearisation must not add the slip priors: built-ins carry them.
         self.lin_prob = Problem(prob.kf, prob.robot, prob.prior_mean, prob.prior_cov,
-                                np.zeros_like(prob.zero_slip), None, prob.q_slip)
+                                np.zeros_like(prob.zero_slip), None, prob.q_slip, prob.robust, prob.robust_k)
 
     def values(self, k: int, pose, W) -> gtsam.Values:
         v = gtsam.Values()
