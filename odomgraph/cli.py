@@ -40,6 +40,7 @@ class RobustName(str, Enum):
 class ImportKind(str, Enum):
     optiodom = "optiodom"
     librsf = "librsf"
+    rosbag = "rosbag"
 
 
 class HoldName(str, Enum):
@@ -342,12 +343,34 @@ def import_(
     fix_sigma: Annotated[float, typer.Option(help="optiodom: 1-sigma of those fixes [m].")] = 0.01,
     ground_truth: Annotated[Optional[Path], typer.Option(
         help="librsf: the ground-truth file (default: *_GT.txt beside SOURCE).")] = None,
+    wheel_topic: Annotated[str, typer.Option(help="rosbag: sensor_msgs/JointState topic.")] = "/joint_states",
+    left_joint: Annotated[str, typer.Option(help="rosbag: left wheel joint name.")] = "left_wheel_joint",
+    right_joint: Annotated[str, typer.Option(help="rosbag: right wheel joint name.")] = "right_wheel_joint",
+    wheel_radius: Annotated[Optional[float], typer.Option(help="rosbag: nominal wheel radius [m].")] = None,
+    track_width: Annotated[Optional[float], typer.Option(help="rosbag: nominal track width [m].")] = None,
+    gps_topic: Annotated[Optional[str], typer.Option(help="rosbag: sensor_msgs/NavSatFix topic.")] = None,
+    imu_topic: Annotated[Optional[str], typer.Option(help="rosbag: sensor_msgs/Imu topic (gyro z).")] = None,
+    gps_lever_arm: Annotated[str, typer.Option(
+        help="rosbag: GPS antenna 'x,y' in the robot frame [m] (ROS keeps it in TF, not in NavSatFix).")]
+    = "0,0",
 ):
     """Convert another dataset's files into a log directory (LOG_FORMAT.md)."""
+    from odomgraph.errors import OdomgraphError
     from odomgraph.io.log import write_log
     if kind is ImportKind.optiodom:
         from odomgraph.io.importers.optiodom import import_optiodom
         log = import_optiodom(source, metadata, fixes_hz, fix_sigma)
+    elif kind is ImportKind.rosbag:
+        from odomgraph.io.importers.rosbag import import_rosbag
+        if wheel_radius is None or track_width is None:
+            raise OdomgraphError("import rosbag needs --wheel-radius and --track-width (the nominal robot)")
+        try:
+            lever = tuple(float(v) for v in gps_lever_arm.split(","))
+            assert len(lever) == 2
+        except (ValueError, AssertionError):
+            raise OdomgraphError(f"--gps-lever-arm: expected 'x,y' in metres, got {gps_lever_arm!r}") from None
+        log = import_rosbag(source, wheel_topic, left_joint, right_joint, wheel_radius, track_width,
+                            gps_topic, imu_topic, gps_lever_arm=lever)
     else:
         from odomgraph.io.importers.librsf import import_librsf
         log = import_librsf(source, ground_truth)
