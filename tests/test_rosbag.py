@@ -5,7 +5,6 @@ import pytest
 
 rosbags = pytest.importorskip("rosbags")
 
-from odomgraph.analysis.metrics import truth_errors  # noqa: E402
 from odomgraph.errors import LogFormatError  # noqa: E402
 from odomgraph.estimators.schedule import Schedule  # noqa: E402
 from odomgraph.io.importers.rosbag import import_rosbag  # noqa: E402
