@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 from typer.testing import CliRunner
 
-from factors.motion import propagate
+from odomgraph.analysis.deadreckoning import dead_reckon
 from odomgraph.analysis.metrics import truth_errors
 from odomgraph.cli import app
 from odomgraph.errors import LogFormatError
@@ -45,25 +45,14 @@ def test_optiodom_smoothed_and_filtered_on_real_data():
 
 
 def _dead_reckoning_rms(log, est):
-    """Nominal wheel odometry from the estimator's first pose (taken from truth)."""
-    w = log.wheel_speeds
+    """Nominal wheel odometry from the estimator's first position, heading from
+    the true path over the next second (libRSF truth has no heading)."""
     t0 = est.t[0]
-    k = np.searchsorted(w.t, t0)
-    pose = np.array([log.truth.at("x", [t0])[0], log.truth.at("y", [t0])[0], 0.0])
-    # heading from the truth path's direction over the first second of motion
-    dx = log.truth.at("x", [t0 + 1.0])[0] - pose[0]
-    dy = log.truth.at("y", [t0 + 1.0])[0] - pose[1]
-    pose[2] = np.arctan2(dy, dx)
-    path = []
-    for i in range(k, len(w.t) - 1):
-        v = 0.5 * (w.v_left[i] + w.v_right[i])
-        om = (w.v_right[i] - w.v_left[i]) / log.robot.track_width
-        p, _ = propagate(*pose, v, om, w.t[i + 1] - w.t[i])
-        pose = p
-        path.append((w.t[i + 1], p[0], p[1]))
-    path = np.array(path)
-    ex = path[:, 1] - log.truth.at("x", path[:, 0])
-    ey = path[:, 2] - log.truth.at("y", path[:, 0])
+    x0, y0 = log.truth.at("x", [t0])[0], log.truth.at("y", [t0])[0]
+    th0 = np.arctan2(log.truth.at("y", [t0 + 1.0])[0] - y0, log.truth.at("x", [t0 + 1.0])[0] - x0)
+    t, p = dead_reckon(log, start=(t0, x0, y0, th0))
+    ex = p[:, 0] - log.truth.at("x", t)
+    ey = p[:, 1] - log.truth.at("y", t)
     return float(np.sqrt(np.mean(ex**2 + ey**2)))
 
 

@@ -28,7 +28,7 @@ from odomgraph.errors import EstimatorDivergedError
 from odomgraph.estimators.graph import NB, Linearization, Problem, linearize
 from odomgraph.estimators.initial import initial_state
 from odomgraph.estimators.keyframes import build_keyframes
-from odomgraph.estimators.measurements import from_log
+from odomgraph.estimators.measurements import from_log, slip_intensity
 from odomgraph.estimators.result import Estimate
 from odomgraph.estimators.schedule import Schedule
 from odomgraph.io.log import Log
@@ -51,15 +51,6 @@ class SmootherOptions:
     slip is a free random walk after the window as in the EKF."""
 
 
-def slip_noise(robot, meas) -> np.ndarray:
-    """(2, 2) slip intensity in (left, right), as the EKF uses it."""
-    pn = robot.process
-    q_d = pn.slip_differential
-    if q_d is None:
-        q_d = 1.0 if (meas.gyro is not None or meas.velocity is not None) else 0.02
-    return pn.slip**2 * np.ones((2, 2)) + 0.25 * q_d**2 * np.array([[1.0, -1.0], [-1.0, 1.0]])
-
-
 def build_problem(log: Log, schedule: Schedule, options: SmootherOptions) -> Problem:
     """The keyframe graph of a log: same initialisation and schedule as the EKF."""
     meas = from_log(log)
@@ -78,7 +69,7 @@ def build_problem(log: Log, schedule: Schedule, options: SmootherOptions) -> Pro
     else:
         zero = mid < meas.t_start + schedule.calibrate_until
     robust = options.slip_cauchy
-    return Problem(kf, log.robot, mean, cov, zero, robust, slip_noise(log.robot, meas), options.robust,
+    return Problem(kf, log.robot, mean, cov, zero, robust, slip_intensity(log.robot.process, meas), options.robust,
                    options.robust_k)
 
 

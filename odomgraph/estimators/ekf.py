@@ -31,7 +31,7 @@ from factors.motion import propagate
 from odomgraph import state as S
 from odomgraph.errors import EstimatorDivergedError
 from odomgraph.estimators.initial import InitialState, initial_state
-from odomgraph.estimators.measurements import Measurements, from_log
+from odomgraph.estimators.measurements import Measurements, from_log, slip_intensity
 from odomgraph.estimators.result import Estimate, Innovations
 from odomgraph.estimators.schedule import Hold, Schedule
 from odomgraph.io.log import Log
@@ -124,13 +124,7 @@ class EKF:
         self.t = self.init.t
         pn = self.robot.process
         self._q = dict(v=pn.accel**2, w=pn.yaw_accel**2, bias=pn.gyro_bias**2, scale=pn.scale**2)
-        # Slip noise in common-mode c = (sL+sR)/2 and differential d = sR-sL
-        # coordinates, mapped to (sL, sR) = (c - d/2, c + d/2).
-        q_d = pn.slip_differential
-        if q_d is None:
-            has_yaw_sensor = self.meas.gyro is not None or self.meas.velocity is not None
-            q_d = 1.0 if has_yaw_sensor else 0.02
-        self._q_slip = pn.slip**2 * np.ones((2, 2)) + 0.25 * q_d**2 * np.array([[1, -1], [-1, 1]])
+        self._q_slip = slip_intensity(pn, self.meas)
         self._R_slip = np.eye(2) * pn.pseudo_slip_sigma**2
         self._R_scale = np.eye(3) * pn.pseudo_scale_sigma**2
         self.holding_scale = False

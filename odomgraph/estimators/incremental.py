@@ -388,9 +388,8 @@ class FixedLagRunner(_Runner):
                 stamps.insert((key, t))
         self.smoother.update(factors, values, stamps)
 
-    def _harvest(self, k):
-        """Record keyframe k's fixed-lag estimate and marginals before it leaves the window."""
-        est = self.smoother.calculateEstimate()
+    def _harvest(self, k, est):
+        """Record keyframe k's fixed-lag estimate (from ``est``) and marginals before it leaves the window."""
         self._store(k, est)
         Sig = np.zeros((NB, NB))
         Sig[np.ix_(X_COLS, X_COLS)] = self.smoother.marginalCovariance(X_KEY(k))
@@ -402,9 +401,11 @@ class FixedLagRunner(_Runner):
     def step(self, k, factors, values):
         kf = self.prob.kf
         # Keyframes that the coming update marginalises: take their estimate now.
-        t_new = kf.t[k]
-        for j in np.nonzero(~self.done[:k] & (kf.t[:k] < t_new - self.options.lag))[0]:
-            self._harvest(int(j))
+        leaving = np.nonzero(~self.done[:k] & (kf.t[:k] < kf.t[k] - self.options.lag))[0]
+        if leaving.size:
+            est = self.smoother.calculateEstimate()
+            for j in leaving:
+                self._harvest(int(j), est)
         self._update(factors, values, [k])
         est = self.smoother.calculateEstimate()
         for j in (k - 1, k):
@@ -412,8 +413,9 @@ class FixedLagRunner(_Runner):
                 self._store(j, est)
 
     def finish(self) -> Estimate:
+        est = self.smoother.calculateEstimate()
         for j in np.nonzero(~self.done)[0]:
-            self._harvest(int(j))
+            self._harvest(int(j), est)
         est = keyframe_rows(self.prob, self.pose, self.W, self.Sig, "fixed-lag")
         # Window marginals are per variable: the cross-covariance of X, W and S
         # of one keyframe is not available, so pose sigma at the row time

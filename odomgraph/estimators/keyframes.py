@@ -95,10 +95,11 @@ def build_keyframes(log: Log, t_start: float, keyframe_hz: float) -> Keyframes:
         # eq. 41 per encoder sample, averaged: var = sum (sigma_i dt_i)^2 / dt_k^2
         dti = np.diff(t_all)
         mi = ticks[1:] / (tpm * dti[:, None])
-        vi = ((a + b * np.abs(mi)) * dti[:, None]) ** 2
+        vi = (speed_sigma(mi, a, b) * dti[:, None]) ** 2
         cumv = np.concatenate([np.zeros((1, 2)), np.cumsum(vi, 0)])
-        var = (cumv[idx[1:]] - cumv[idx[:-1]]) / dt_k[:, None] ** 2 + 1.0 / (6.0 * (tpm * dt_k[:, None]) ** 2)
-        sigma = np.sqrt(var)
+        # quantisation counts once per keyframe interval (only its two ends are floored)
+        quant = speed_sigma(np.zeros_like(m), 0.0, 0.0, tpm, dt_k[:, None])
+        sigma = np.sqrt((cumv[idx[1:]] - cumv[idx[:-1]]) / dt_k[:, None] ** 2 + quant**2)
     else:
         w = log.wheel_speeds
         first = int(np.searchsorted(w.t, t_start, side="left"))

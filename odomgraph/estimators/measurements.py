@@ -81,3 +81,16 @@ def from_log(log: Log) -> Measurements:
     if log.velocity is not None and len(log.velocity.t):
         vel = (log.velocity.t, np.stack([log.velocity.v, log.velocity.omega], -1))
     return Measurements(log.t_start, wheel, gyro, gps, ranges, vel, tuple(notes))
+
+
+def slip_intensity(process, meas: Measurements) -> np.ndarray:
+    """(2, 2) slip random-walk intensity in (left, right) [(m/s)^2/s], for the EKF and the smoothers.
+
+    Built in common-mode c = (sL+sR)/2 and differential d = sR-sL coordinates,
+    mapped by (sL, sR) = (c - d/2, c + d/2). The differential default depends
+    on the log: see ProcessNoise.slip_differential.
+    """
+    q_d = process.slip_differential
+    if q_d is None:
+        q_d = 1.0 if (meas.gyro is not None or meas.velocity is not None) else 0.02
+    return process.slip**2 * np.ones((2, 2)) + 0.25 * q_d**2 * np.array([[1.0, -1.0], [-1.0, 1.0]])

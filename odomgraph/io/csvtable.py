@@ -8,7 +8,6 @@ second.
 from __future__ import annotations
 
 import io
-import math
 from pathlib import Path
 
 import numpy as np
@@ -119,8 +118,3 @@ def write_table(path: Path, columns: dict[str, np.ndarray], formats: dict[str, s
         buf.write(",".join(c[i] for c in cols) + "\n")
     Path(path).write_text(buf.getvalue(), encoding="utf-8")
 
-
-def finite_or_none(x) -> float | None:
-    """JSON-friendly float (None for NaN/inf)."""
-    x = float(x)
-    return x if math.isfinite(x) else None
