@@ -88,6 +88,30 @@ class _Progress:
         self._p.update(self._task, completed=done)
 
 
+class _MultiProgress(_Progress):
+    """One bar per run: called with a label, returns that run's progress(done, total)."""
+
+    def __init__(self):
+        super().__init__("{task.description:<18}")
+
+    def __call__(self, label: str):
+        task = self._p.add_task(label, total=1)
+
+        def update(done: int, total: int):
+            self._p.update(task, completed=done, total=total)
+        return update
+
+
+def _print_comparison(m: dict) -> None:
+    from odomgraph.analysis.report import metrics_table_rows
+    rows = metrics_table_rows(m)
+    keep = [0, 1, 2, 3, 7, 9]  # the columns that fit a terminal
+    widths = [max(len(r[i]) for r in rows) for i in keep]
+    for r in rows:
+        typer.echo("  ".join(r[i].ljust(w) for i, w in zip(keep, widths)))
+    typer.echo(f"reference: {m['reference_note']}")
+
+
 def _parse_schedule(calibrate_until: str, hold: HoldName):
     from odomgraph.errors import OdomgraphError
     from odomgraph.estimators.schedule import Hold, Schedule
@@ -254,38 +278,56 @@ def estimate(
 @app.command()
 @_user_errors
 def demo(
-    output: Annotated[Path, typer.Option("--output", "-o", help="Directory for the log, estimates and figure.")]
+    output: Annotated[Path, typer.Option("--output", "-o", help="Directory for the log, estimates and report.")]
     = Path("demo-out"),
     seed: Annotated[int, typer.Option(help="Random seed of the simulation.")] = 0,
 ):
-    """Simulate the paper's scenario (sec. IV), run the EKF and the batch smoother, and draw the
-    paper's figures 1-3 with both on the same axes."""
-    from odomgraph.analysis.plots import overview_figure
+    """Simulate the paper's scenario (sec. IV), run the EKF, iSAM2 and the batch smoother, and write
+    the comparison report (report.html, the paper's figures, metrics.json) with the log and estimates."""
     from odomgraph.estimators.schedule import Schedule
-    from odomgraph.io.estimate import write_estimate
-    from odomgraph.io.log import write_log
-    from odomgraph.io.outdir import atomic_output_dir
-    from odomgraph.pipeline import Method, estimate as run_estimate, summary
+    from odomgraph.pipeline import compare_to_dir
     from odomgraph.sim.scenarios import paper
     from odomgraph.sim.simulate import simulate as run_sim
 
     sc = paper()
     log = run_sim(sc, seed).with_(path=output / "log")
-    schedule = Schedule(calibrate_until=sc.calibrate_until)
-    results = []
-    for method in (Method.ekf, Method.batch):
-        with _Progress(method.value) as bar:
-            est = run_estimate(log, method, schedule, progress=bar)
-        results.append((est, summary(est, log, schedule)))
-    with atomic_output_dir(output) as d:
-        write_log(log, d / "log")
-        for est, s in results:
-            write_estimate(est, d / est.method, s)
-        overview_figure([est for est, _ in results], log, d / "figure.png",
-                        title=f"odomgraph demo: paper scenario (sec. IV), seed {seed}")
-    for _, s in results:
-        _print_summary(s)
-    typer.echo(f"wrote {output}/log, {output}/ekf, {output}/batch and {output}/figure.png")
+    with _MultiProgress() as bars:
+        cmp = compare_to_dir(log, output, Schedule(calibrate_until=sc.calibrate_until), bars,
+                             title=f"odomgraph demo: paper scenario (sec. IV), seed {seed}", include_log=True)
+    _print_comparison(cmp.metrics)
+    typer.echo(f"wrote {output}/report.html (open it in a browser), the figures, metrics.json, "
+               f"{output}/log and one estimate directory per estimator")
+
+
+@app.command()
+@_user_errors
+def compare(
+    log_dir: Annotated[Path, typer.Argument(metavar="LOG", help="Log directory (LOG_FORMAT.md).")],
+    output: Annotated[Path, typer.Option("--output", "-o", help="Report directory to write.")],
+    calibrate_until: Annotated[str, typer.Option(
+        help="Seconds from the log start to estimate scale factors with slip forced to 0; "
+             "after it the scale factors are held and slip is estimated. 0 = slip only.")] = "20",
+    hold: Annotated[HoldName, typer.Option(help="How the EKF holds the scale factors (see estimate).")]
+    = HoldName.consider,
+    gate: Annotated[Optional[float], typer.Option(help="EKF: NIS gate for GPS/range/velocity (default off).")]
+    = None,
+    keyframe_hz: Annotated[Optional[float], typer.Option(help="Smoothers: keyframe rate [Hz] (default 5).")]
+    = None,
+    robust: Annotated[Optional[RobustName], typer.Option(help="Smoothers: robust loss for GPS and ranges.")]
+    = None,
+):
+    """Run the EKF, iSAM2 (online and smoothed) and the batch smoother on one log and write a
+    self-contained report.html, the paper's figures (1-3, 7, NEES/NIS), metrics.json and the estimates.
+    Without truth in the log, positions are compared with GPS."""
+    from odomgraph.io.log import read_log
+    from odomgraph.pipeline import compare_to_dir
+    schedule = _parse_schedule(calibrate_until, hold)
+    log = read_log(log_dir)
+    with _MultiProgress() as bars:
+        cmp = compare_to_dir(log, output, schedule, bars, gate=gate, keyframe_hz=keyframe_hz,
+                             robust=robust.value if robust else None)
+    _print_comparison(cmp.metrics)
+    typer.echo(f"wrote {output}/report.html")
 
 
 @app.command()

@@ -135,3 +135,29 @@ def calibrate(log: Log, schedule: Schedule = Schedule(calibrate_until=None), met
         report[f"dead_reckoning_{name}"] = {"rms_m": float(np.sqrt(np.mean(e**2))), "final_m": float(e[-1])}
     report["reference"] = "truth" if log.truth is not None else "smoothed estimate"
     return new, report
+
+
+def compare_to_dir(log: Log, out: Path, schedule: Schedule, progress_for=None, title: str | None = None,
+                   include_log: bool = False, **options):
+    """Run the EKF, iSAM2 and batch on ``log`` and write the comparison directory
+    atomically: report.html, metrics.json, the figures, figure.png (overview)
+    and one estimate directory per estimator (isam2/ holds online.csv).
+    ``include_log`` also writes the log itself to out/log (the demo does).
+    Returns the Comparison."""
+    from odomgraph.analysis.compare import run_comparison
+    from odomgraph.analysis.plots import overview_figure
+    from odomgraph.analysis.report import write_report
+    from odomgraph.io.estimate import write_estimate
+    from odomgraph.io.log import write_log
+    from odomgraph.io.outdir import atomic_output_dir
+    cmp = run_comparison(log, schedule, progress_for, **options)
+    title = title or f"odomgraph: EKF vs smoother on {log.path.name if log.path else 'a log'}"
+    with atomic_output_dir(out) as d:
+        if include_log:
+            write_log(log, d / "log")
+        for label, est in cmp.estimates.items():
+            if label != "isam2-online":  # it is isam2/online.csv
+                write_estimate(est, d / label, summary(est, log, schedule))
+        write_report(cmp, d, title)
+        overview_figure([cmp.estimates["ekf"], cmp.estimates["batch"]], log, d / "figure.png", title=title)
+    return cmp

@@ -88,13 +88,8 @@ def truth_errors(est: Estimate, log: Log) -> Errors | None:
     if log.truth_scales is not None:
         final = {n: float(est.mean[-1, i] - tv)
                  for n, i, tv in zip(("left", "right", "track"), S.SCALE, log.truth_scales)}
-    nees = None
-    if est.pose_cov is not None and "theta" in series:
-        e = np.stack([series["x"], series["y"], series["theta"]], -1)
-        C = est.pose_cov[inside]
-        ok = np.linalg.det(C) > 0
-        if ok.any():
-            nees = float(np.mean(np.einsum("ni,ni->n", e[ok], np.linalg.solve(C[ok], e[ok][..., None])[..., 0])))
+    ns = nees_series(est, log)
+    nees = float(np.mean(ns[1])) if ns is not None and ns[1].size else None
     return Errors(rms_pos, rms_slip, final, cover, nees, t, series, post)
 
 
@@ -102,3 +97,61 @@ def nis_summary(est: Estimate) -> dict[str, dict[str, float]]:
     """Mean NIS per sensor and its expected value (the measurement dimension)."""
     return {k: {"mean": float(np.mean(v.nis)), "expected": float(v.dof), "n": int(v.nis.size)}
             for k, v in est.innovations.items() if v.nis.size}
+
+
+def pose_at(est: Estimate, t: np.ndarray) -> np.ndarray:
+    """(M, 3) estimated (x, y, theta) at times t inside the estimate's span, by linear
+    interpolation (heading unwrapped first, so it does not jump at +-pi)."""
+    th = np.unwrap(est.mean[:, S.THETA])
+    return np.stack([np.interp(t, est.t, est.mean[:, S.X]), np.interp(t, est.t, est.mean[:, S.Y]),
+                     wrap_angle(np.interp(t, est.t, th))], -1)
+
+
+def gps_deviation(est: Estimate, log: Log) -> tuple[np.ndarray, np.ndarray] | None:
+    """Distance between the measured GPS fixes and the antenna position the estimate
+    predicts (pose + lever arm, paper eq. 8), as in the paper's fig. 7.
+
+    Returns (t (M,) [s], deviation (M,) [m]) for fixes inside the estimate's span,
+    or None when the log has no GPS.
+    """
+    from factors.gps import antenna_position
+    g = log.gps
+    if g is None or len(g.t) == 0:
+        return None
+    inside = (g.t >= est.t[0]) & (g.t <= est.t[-1])
+    t = g.t[inside]
+    p = pose_at(est, t)
+    h, _ = antenna_position(p[:, 0], p[:, 1], p[:, 2], log.robot.gps_lever_arm)
+    return t, np.hypot(h[:, 0] - g.x[inside], h[:, 1] - g.y[inside])
+
+
+def range_residuals(est: Estimate, log: Log) -> tuple[np.ndarray, np.ndarray] | None:
+    """Measured minus predicted range (paper eq. 12) at each range time inside the
+    estimate's span: (t (M,) [s], residual (M,) [m]); None without ranges."""
+    from factors.ranging import beacon_range
+    r = log.ranges
+    if r is None or len(r.t) == 0 or not log.robot.beacons:
+        return None
+    inside = (r.t >= est.t[0]) & (r.t <= est.t[-1])
+    t = r.t[inside]
+    p = pose_at(est, t)
+    bxy = np.asarray([[b.x, b.y] for b in log.robot.beacons])[r.beacon[inside]]
+    h, _ = beacon_range(p[:, 0], p[:, 1], p[:, 2], bxy, log.robot.range_lever_arm)
+    return t, r.range[inside] - h[:, 0]
+
+
+def nees_series(est: Estimate, log: Log) -> tuple[np.ndarray, np.ndarray] | None:
+    """Pose NEES (x, y, theta) at each row inside the truth's span: (t, nees);
+    None without truth heading or pose covariance. 3 on average when consistent."""
+    tr = log.truth
+    if tr is None or est.pose_cov is None or tr.at("theta", est.t[:1]) is None:
+        return None
+    inside = (est.t >= tr.t[0]) & (est.t <= tr.t[-1])
+    t = est.t[inside]
+    e = np.stack([est.mean[inside, S.X] - tr.at("x", t), est.mean[inside, S.Y] - tr.at("y", t),
+                  wrap_angle(est.mean[inside, S.THETA] - tr.at("theta", t))], -1)
+    C = est.pose_cov[inside]
+    ok = np.linalg.det(C) > 0
+    nees = np.full(t.size, np.nan)
+    nees[ok] = np.einsum("ni,ni->n", e[ok], np.linalg.solve(C[ok], e[ok][..., None])[..., 0])
+    return t[ok], nees[ok]

@@ -60,6 +60,9 @@ class EKFOptions:
     max_mean_nis: float = 50.0
     """Diverged when a sensor's running mean NIS (about its last 50 updates)
     exceeds this many times its dimension: the filter no longer explains the data."""
+    slip_states: bool = True
+    """False removes the slip states (they stay exactly 0 with zero variance):
+    the conventional filter that believes odometry, the paper's fig. 7 baseline."""
 
 
 def event_stream(meas: Measurements, t0: float):
@@ -125,6 +128,11 @@ class EKF:
         pn = self.robot.process
         self._q = dict(v=pn.accel**2, w=pn.yaw_accel**2, bias=pn.gyro_bias**2, scale=pn.scale**2)
         self._q_slip = slip_intensity(pn, self.meas)
+        if not options.slip_states:
+            self._q_slip = np.zeros((2, 2))
+            self.x[_SLIP_IDX] = 0.0
+            self.P[_SLIP_IDX, :] = 0.0
+            self.P[:, _SLIP_IDX] = 0.0
         self._R_slip = np.eye(2) * pn.pseudo_slip_sigma**2
         self._R_scale = np.eye(3) * pn.pseudo_scale_sigma**2
         self.holding_scale = False
@@ -288,7 +296,8 @@ class EKF:
         if sch.hold is Hold.pseudo and switch_sigma is not None:
             cal_sigma = switch_sigma  # the pseudo-update's sigma is not an uncertainty
         return Estimate(
-            method="ekf", t=out_t[:row], mean=out_x[:row], sigma=sigma, pose_cov=out_pose[:row],
+            method="ekf" if opt.slip_states else "ekf-no-slip", t=out_t[:row], mean=out_x[:row], sigma=sigma,
+            pose_cov=out_pose[:row],
             innovations=innov, wall_time_s=time.perf_counter() - wall0, n_updates=n_up,
             t_switch=t_switch, calibration_sigma=cal_sigma, notes=notes,
         )

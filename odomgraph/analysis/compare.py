@@ -1,0 +1,136 @@
+"""Run the EKF and the smoothers on one log and score them side by side.
+
+The numbers behind ``odomgraph compare`` and the demo's report: for each
+estimator the RMS position error (against truth, or against GPS when a log
+has no truth), slip RMS per wheel, the final scale factors with sigma, 3-sigma
+coverage, wall time and updates per second. Pure computation: figures and
+HTML are ``analysis.report``'s job.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from odomgraph.analysis.metrics import gps_deviation, range_residuals, truth_errors
+from odomgraph.errors import OdomgraphError
+from odomgraph.estimators.result import Estimate
+from odomgraph.estimators.schedule import Schedule
+from odomgraph.io.log import Log
+
+#: Estimators in the report, in drawing order: (label, method run to get it).
+#: isam2-online is the causal estimate of the isam2 run (online.csv).
+ESTIMATORS = ("ekf", "isam2-online", "isam2", "batch")
+
+
+@dataclass
+class Comparison:
+    log: Log
+    schedule: Schedule
+    estimates: dict[str, Estimate]
+    """Label (ESTIMATORS) -> estimate."""
+    no_slip: Estimate
+    """The EKF without slip states: the paper's fig. 7 baseline."""
+    metrics: dict
+    """metrics.json content (see ``comparison_metrics``)."""
+
+
+def run_comparison(log: Log, schedule: Schedule, progress_for=None, **options) -> Comparison:
+    """Run every estimator of ESTIMATORS (and the no-slip EKF) on ``log``.
+
+    ``progress_for(label)`` may return a progress(done, total) callback for
+    each run. ``options`` are passed to every estimator (see pipeline.estimate).
+    """
+    from odomgraph.estimators.ekf import EKFOptions, run_ekf
+    from odomgraph.pipeline import Method, estimate
+    if schedule.calibrate_until is None:
+        raise OdomgraphError("compare runs the EKF, which needs a schedule: use --calibrate-until SECONDS "
+                             "(0 = slip only), not 'none'")
+    prog = progress_for or (lambda label: None)
+    ests: dict[str, Estimate] = {}
+    ests["ekf"] = estimate(log, Method.ekf, schedule, prog("ekf"), **options)
+    isam = estimate(log, Method.isam2, schedule, prog("isam2"), **options)
+    online = replace(isam.online, method="isam2-online", t_switch=isam.t_switch, wall_time_s=isam.wall_time_s,
+                     n_updates=isam.n_updates)
+    ests["isam2-online"], ests["isam2"] = online, isam
+    ests["batch"] = estimate(log, Method.batch, schedule, prog("batch"), **options)
+    gate = options.get("gate")
+    # Without slip states the filter is expected to disagree with its encoders
+    # during slip (that is what fig. 7 shows), so its NIS watch is off.
+    no_slip = run_ekf(log, schedule, EKFOptions(gate=gate, slip_states=False, max_mean_nis=np.inf),
+                      prog("ekf without slip"))
+    return Comparison(log, schedule, ests, no_slip, comparison_metrics(ests, log, schedule, no_slip))
+
+
+def _rms(x: np.ndarray) -> float | None:
+    return float(np.sqrt(np.mean(x**2))) if x.size else None
+
+
+def estimator_metrics(est: Estimate, log: Log) -> dict:
+    """One estimator's row of the comparison (None where the log cannot tell)."""
+    out = {
+        "wall_time_s": est.wall_time_s,
+        "n_updates": est.n_updates,
+        "updates_per_second": est.n_updates / est.wall_time_s if est.wall_time_s > 0 else None,
+        "rms_position_m": None,
+        "rms_gps_deviation_m": None,
+        "rms_range_residual_m": None,
+        "rms_slip_mps": {"left": None, "right": None},
+        "scale": {},
+        "coverage_3sigma": {},
+        "coverage_3sigma_min": None,
+        "mean_nees_pose": None,
+    }
+    cal = est.calibration
+    err = truth_errors(est, log)
+    for name, c in cal.items():
+        out["scale"][name] = {"value": c["value"], "sigma": c["sigma"], "error": None}
+    if err is not None:
+        out["rms_position_m"] = err.rms_position_m
+        out["rms_slip_mps"].update(err.rms_slip_mps)
+        for k, e in err.final_scale_error.items():
+            out["scale"][f"scale_{k}"]["error"] = e
+        out["coverage_3sigma"] = err.coverage_3sigma
+        out["coverage_3sigma_min"] = min(err.coverage_3sigma.values()) if err.coverage_3sigma else None
+        out["mean_nees_pose"] = err.mean_nees_pose
+    dev = gps_deviation(est, log)
+    if dev is not None:
+        out["rms_gps_deviation_m"] = _rms(dev[1])
+    res = range_residuals(est, log)
+    if res is not None:
+        out["rms_range_residual_m"] = _rms(res[1])
+    return out
+
+
+def reference_of(log: Log) -> str:
+    """What positions are scored against: 'truth', else 'gps', else 'ranges', else 'none'."""
+    if log.truth is not None:
+        return "truth"
+    if log.gps is not None and len(log.gps.t):
+        return "gps"
+    if log.ranges is not None and len(log.ranges.t):
+        return "ranges"
+    return "none"
+
+
+def comparison_metrics(ests: dict[str, Estimate], log: Log, schedule: Schedule,
+                       no_slip: Estimate | None = None) -> dict:
+    """metrics.json: the log, the reference, the schedule and one entry per estimator."""
+    rows = {label: estimator_metrics(e, log) for label, e in ests.items()}
+    if no_slip is not None:
+        rows["ekf-no-slip"] = estimator_metrics(no_slip, log)
+    ref = reference_of(log)
+    return {
+        "log": str(log.path) if log.path else None,
+        "reference": ref,
+        "reference_note": {
+            "truth": "errors against the log's truth.csv",
+            "gps": "the log has no truth: positions are compared with the GPS fixes (antenna, lever arm applied)",
+            "ranges": "the log has no truth and no GPS: positions are judged by their range residuals",
+            "none": "the log has no truth, GPS or ranges: positions cannot be scored",
+        }[ref],
+        "truth_scales": (dict(zip(("scale_left", "scale_right", "scale_track"), log.truth_scales))
+                         if log.truth_scales is not None else None),
+        "schedule": {"calibrate_until": schedule.calibrate_until, "hold": schedule.hold.value},
+        "estimators": rows,
+    }

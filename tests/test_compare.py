@@ -1,0 +1,136 @@
+"""`odomgraph compare`: the report's files, its numbers equal to the estimators'
+own scores, the fig. 7 finding, and logs without truth or GPS."""
+import json
+import re
+import shutil
+
+import numpy as np
+import pytest
+from typer.testing import CliRunner
+
+from odomgraph.analysis.compare import run_comparison
+from odomgraph.analysis.metrics import gps_deviation, range_residuals
+from odomgraph.cli import app
+from odomgraph.estimators.schedule import Schedule
+from odomgraph.io.log import read_log, write_log
+from odomgraph.sim.scenarios import beacons_around, paper
+from odomgraph.sim.simulate import simulate
+
+runner = CliRunner()
+FIGS = ["consistency.png", "fig1_trajectory.png", "fig2_slip.png", "fig3_scale_factors.png",
+        "fig7_gps_deviation.png"]
+
+
+@pytest.fixture(scope="module")
+def short_log_dir(tmp_path_factory):
+    """70 s of the paper scenario: calibration, then the left wheel's slip."""
+    d = tmp_path_factory.mktemp("cmp") / "paper70"
+    write_log(simulate(paper(70.0), 5), d)
+    return d
+
+
+@pytest.fixture(scope="module")
+def compared(tmp_path_factory, short_log_dir):
+    out = tmp_path_factory.mktemp("cmpout") / "report"
+    res = runner.invoke(app, ["compare", str(short_log_dir), "-o", str(out)])
+    assert res.exit_code == 0, res.output
+    return out, res.output
+
+
+def test_compare_writes_a_self_contained_report(compared):
+    out, output = compared
+    names = sorted(p.name for p in out.iterdir())
+    assert names == sorted(["batch", "ekf", "isam2", "figure.png", "metrics.json", "report.html", *FIGS])
+    assert (out / "isam2" / "online.csv").exists()
+    page = (out / "report.html").read_text()
+    # every figure embedded as a data URI, nothing fetched from elsewhere
+    imgs = re.findall(r"<img alt='([^']+)' src='data:image/png;base64,([A-Za-z0-9+/=]+)'", page)
+    assert sorted(n for n, _ in imgs) == FIGS
+    for name, data in imgs:
+        import base64
+        assert base64.b64decode(data) == (out / name).read_bytes()
+    assert not re.search(r"(src|href)=['\"](https?:|//)", page)
+    assert "isam2-online" in page and "RMS position error" in page
+    assert "isam2-online" in output and "reference: errors against the log's truth.csv" in output
+
+
+def test_compare_metrics_equal_the_estimators_own_scores(compared):
+    out, _ = compared
+    m = json.loads((out / "metrics.json").read_text())
+    assert m["reference"] == "truth"
+    assert set(m["estimators"]) == {"ekf", "isam2-online", "isam2", "batch", "ekf-no-slip"}
+    for label in ("ekf", "isam2", "batch"):
+        s = json.loads((out / label / "summary.json").read_text())
+        e = m["estimators"][label]
+        assert e["rms_position_m"] == pytest.approx(s["errors"]["rms_position_m"], rel=1e-12)
+        for w in ("left", "right"):
+            assert e["rms_slip_mps"][w] == pytest.approx(s["errors"]["rms_slip_mps"][w], rel=1e-12)
+        for k in ("left", "right", "track"):
+            assert e["scale"][f"scale_{k}"]["error"] == pytest.approx(s["errors"]["final_scale_error"][k],
+                                                                      rel=1e-12)
+            assert e["scale"][f"scale_{k}"]["sigma"] == pytest.approx(s["calibration"][f"scale_{k}"]["sigma"])
+        assert e["coverage_3sigma_min"] == pytest.approx(min(s["errors"]["coverage_3sigma"].values()))
+        assert e["wall_time_s"] > 0 and e["updates_per_second"] > 0
+    online = json.loads((out / "isam2" / "summary.json").read_text())["errors_online"]
+    assert m["estimators"]["isam2-online"]["rms_position_m"] == pytest.approx(online["rms_position_m"])
+    # Accuracy and consistency of the report's numbers on this log.
+    for label in ("ekf", "isam2-online", "isam2", "batch"):
+        e = m["estimators"][label]
+        assert e["rms_position_m"] < 0.05 and e["coverage_3sigma_min"] >= 0.9, (label, e)
+        assert max(e["rms_slip_mps"].values()) < 0.06, (label, e)
+    assert m["estimators"]["batch"]["rms_slip_mps"]["left"] < m["estimators"]["ekf"]["rms_slip_mps"]["left"]
+
+
+def test_fig7_without_slip_states_the_filter_leaves_gps(compared):
+    """The paper's fig. 7: with slip states the estimate stays on GPS through the
+    slip; without them it departs by many GPS sigmas."""
+    out, _ = compared
+    m = json.loads((out / "metrics.json").read_text())["estimators"]
+    assert m["ekf"]["rms_gps_deviation_m"] < 0.09  # GPS 0.05 m per axis: 0.07 m 2-D RMS
+    assert m["ekf-no-slip"]["rms_gps_deviation_m"] > 3 * m["ekf"]["rms_gps_deviation_m"]
+    assert m["ekf-no-slip"]["rms_position_m"] > 5 * m["ekf"]["rms_position_m"]
+
+
+def test_without_truth_the_report_compares_against_gps(tmp_path, short_log_dir):
+    d = tmp_path / "notruth"
+    shutil.copytree(short_log_dir, d)
+    (d / "truth.csv").unlink()
+    (d / "truth.toml").unlink()
+    log = read_log(d)
+    cmp = run_comparison(log, Schedule(20.0))
+    m = cmp.metrics
+    assert m["reference"] == "gps" and "no truth" in m["reference_note"]
+    for label, est in cmp.estimates.items():
+        e = m["estimators"][label]
+        assert e["rms_position_m"] is None and e["coverage_3sigma"] == {}
+        t, dev = gps_deviation(est, log)
+        assert e["rms_gps_deviation_m"] == pytest.approx(np.sqrt(np.mean(dev**2)))
+        assert e["rms_gps_deviation_m"] < 0.09
+    from odomgraph.analysis.report import write_report
+    write_report(cmp, tmp_path)
+    page = (tmp_path / "report.html").read_text()
+    assert "RMS deviation from GPS" in page and "class='note'" in page
+
+
+def test_ranges_only_log_is_judged_by_range_residuals():
+    sc = paper(50.0)
+    box = simulate(sc, 1).truth.values
+    robot = sc.robot.with_(beacons=beacons_around(box["x"].min(), box["x"].max(), box["y"].min(), box["y"].max()),
+                           range_sigma=0.05)
+    sc = sc.with_(robot=robot, rates=sc.rates.__class__(encoders=20, gyro=25, gps=0, ranges=10))
+    log = simulate(sc, 2).with_(truth=None, truth_scales=None)
+    cmp = run_comparison(log, Schedule(20.0))
+    assert cmp.metrics["reference"] == "ranges"
+    for label, est in cmp.estimates.items():
+        e = cmp.metrics["estimators"][label]
+        assert e["rms_gps_deviation_m"] is None
+        _, res = range_residuals(est, log)
+        assert e["rms_range_residual_m"] == pytest.approx(np.sqrt(np.mean(res**2)))
+        assert e["rms_range_residual_m"] < 0.1, label  # 0.05 m range noise
+
+
+def test_compare_refuses_a_schedule_the_ekf_cannot_run(short_log_dir, tmp_path):
+    res = runner.invoke(app, ["compare", str(short_log_dir), "-o", str(tmp_path / "x"), "--calibrate-until",
+                              "none"])
+    assert res.exit_code == 1 and "needs a schedule" in res.output
+    assert not (tmp_path / "x").exists()
