@@ -220,13 +220,14 @@ def keyframe_rows(prob: Problem, pose: np.ndarray, W: np.ndarray, Sig: np.ndarra
 
 
 def run_batch(log: Log, schedule: Schedule = Schedule(), options: SmootherOptions = SmootherOptions(),
-              progress=None) -> Estimate:
-    """Smooth the whole log. Starts from the EKF (same schedule; 20 s when there is none)."""
+              progress=None, initial: Estimate | None = None) -> Estimate:
+    """Smooth the whole log. Starts from ``initial``, an EKF estimate of the same
+    log, or runs the EKF for it (same schedule; 20 s when there is none)."""
     from odomgraph.estimators.ekf import run_ekf
     wall0 = time.perf_counter()
     prob = build_problem(log, schedule, options)
     ekf_schedule = schedule if schedule.calibrate_until is not None else Schedule(20.0)
-    ekf = run_ekf(log, ekf_schedule)
+    ekf = initial if initial is not None else run_ekf(log, ekf_schedule)
     pose, W = initial_guess(prob, ekf)
     pose, W, iters, cost = solve(prob, pose, W, options, progress)
     if not (np.all(np.isfinite(pose)) and np.all(np.isfinite(W))):

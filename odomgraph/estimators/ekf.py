@@ -80,25 +80,29 @@ def event_stream(meas: Measurements, t0: float):
     return t[order], c[order], r[order]
 
 
-def add_process_noise(P: np.ndarray, J: np.ndarray, dt: float, q: dict, q_slip: np.ndarray) -> None:
-    """Add the discrete process noise of one step to P (11, 11) in place.
+def add_process_noise(P: np.ndarray, J: np.ndarray, dt, q: dict, q_slip: np.ndarray) -> None:
+    """Add the discrete process noise of one step to P (..., 11, 11) in place.
 
-    J: (3, 5) motion Jacobian of the step; q: intensities (see ProcessNoise)
-    squared, keys v, w, bias, scale; q_slip: (2, 2) slip intensity matrix.
-    See the module docstring for the derivation; G = [J_v, J_omega].
+    J: (..., 3, 5) motion Jacobian of the step; dt: step [s], scalar or (...)
+    for a batch of runs; q: intensities (see ProcessNoise) squared, keys v, w,
+    bias, scale; q_slip: (2, 2) slip intensity matrix. See the module docstring
+    for the derivation; G = [J_v, J_omega].
     """
-    G = J[:, 3:5]
+    G = J[..., :, 3:5]
     qv, qw = q["v"], q["w"]
     Gq = G * (qv, qw)
-    P[0:3, 0:3] += (dt / 3.0) * (Gq @ G.T)
-    P[0:3, 3:5] += (0.5 * dt) * Gq
-    P[3:5, 0:3] += (0.5 * dt) * Gq.T
-    P[3, 3] += qv * dt
-    P[4, 4] += qw * dt
-    P[5, 5] += q["bias"] * dt
-    P[6:8, 6:8] += q_slip * dt
+    dt = np.asarray(dt)[..., None, None] if np.ndim(dt) else dt
+    GqGt = Gq @ np.swapaxes(G, -1, -2)
+    P[..., 0:3, 0:3] += (dt / 3.0) * GqGt
+    P[..., 0:3, 3:5] += (0.5 * dt) * Gq
+    P[..., 3:5, 0:3] += (0.5 * dt) * np.swapaxes(Gq, -1, -2)
+    dt1 = dt[..., 0, 0] if np.ndim(dt) else dt
+    P[..., 3, 3] += qv * dt1
+    P[..., 4, 4] += qw * dt1
+    P[..., 5, 5] += q["bias"] * dt1
+    P[..., 6:8, 6:8] += q_slip * dt
     if q["scale"]:
-        P[8:11, 8:11] += np.eye(3) * q["scale"] * dt
+        P[..., 8:11, 8:11] += np.eye(3) * q["scale"] * dt
 
 
 def _inv_small(A: np.ndarray) -> np.ndarray:
@@ -282,25 +286,32 @@ class EKF:
             progress(len(t_ev), len(t_ev))
         self._check()
 
-        sigma = np.sqrt(np.maximum(out_var[:row], 0.0))
-        notes = list(m.notes) + [self.init.note]
-        innov = {}
-        for code, lst in nis.items():
-            if lst:
-                arr = np.asarray(lst)
-                acc = arr[:, 1] >= 0
-                if (~acc).any():
-                    notes.append(f"{SENSOR_NAMES[code]}: {int((~acc).sum())} measurement(s) rejected by the gate")
-                innov[SENSOR_NAMES[code]] = Innovations(arr[acc, 0], arr[acc, 1], _DOF[code])
-        cal_sigma = sigma[-1, S.SCALE].copy()
-        if sch.hold is Hold.pseudo and switch_sigma is not None:
-            cal_sigma = switch_sigma  # the pseudo-update's sigma is not an uncertainty
-        return Estimate(
-            method="ekf" if opt.slip_states else "ekf-no-slip", t=out_t[:row], mean=out_x[:row], sigma=sigma,
-            pose_cov=out_pose[:row],
-            innovations=innov, wall_time_s=time.perf_counter() - wall0, n_updates=n_up,
-            t_switch=t_switch, calibration_sigma=cal_sigma, notes=notes,
-        )
+        return make_estimate("ekf" if opt.slip_states else "ekf-no-slip", out_t[:row], out_x[:row], out_var[:row],
+                             out_pose[:row], nis, list(m.notes) + [self.init.note], time.perf_counter() - wall0,
+                             n_up, t_switch, switch_sigma, sch.hold)
+
+
+def make_estimate(method: str, t, mean, var, pose_cov, nis: dict, notes: list, wall: float, n_up: int,
+                  t_switch, switch_sigma, hold: Hold) -> Estimate:
+    """The Estimate of one EKF run from its recorded rows.
+
+    nis: sensor code -> list of (t, NIS), a negative NIS marking a gated
+    measurement; switch_sigma: (3,) scale sigma at the schedule's switch.
+    """
+    sigma = np.sqrt(np.maximum(var, 0.0))
+    innov = {}
+    for code, lst in nis.items():
+        if lst:
+            arr = np.asarray(lst)
+            acc = arr[:, 1] >= 0
+            if (~acc).any():
+                notes.append(f"{SENSOR_NAMES[code]}: {int((~acc).sum())} measurement(s) rejected by the gate")
+            innov[SENSOR_NAMES[code]] = Innovations(arr[acc, 0], arr[acc, 1], _DOF[code])
+    cal_sigma = sigma[-1, S.SCALE].copy()
+    if hold is Hold.pseudo and switch_sigma is not None:
+        cal_sigma = switch_sigma  # the pseudo-update's sigma is not an uncertainty
+    return Estimate(method=method, t=t, mean=mean, sigma=sigma, pose_cov=pose_cov, innovations=innov,
+                    wall_time_s=wall, n_updates=n_up, t_switch=t_switch, calibration_sigma=cal_sigma, notes=notes)
 
 
 def run_ekf(log: Log, schedule: Schedule = Schedule(), options: EKFOptions = EKFOptions(), progress=None) -> Estimate:

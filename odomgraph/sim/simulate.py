@@ -62,9 +62,16 @@ def _sensor_times(rng, rate: float, t0: float, t1: float, jitter: float) -> np.n
     return base + rng.uniform(-jitter, jitter, base.size) * period
 
 
-def simulate(sc: Scenario, seed: int = 0) -> Log:
-    """Simulate ``sc`` with random seed ``seed``; returns a Log with truth."""
+def simulate(sc: Scenario, seed: int = 0, timing_seed: int | None = None) -> Log:
+    """Simulate ``sc`` with random seed ``seed``; returns a Log with truth.
+
+    ``timing_seed``, when given, draws every sensor's phase and jitter from its
+    own generator, so logs with different ``seed`` and the same
+    ``timing_seed`` share their timestamps exactly and differ only in noise
+    (what a Monte-Carlo study vectorised over runs needs, see ekf_many).
+    """
     rng = np.random.default_rng(seed)
+    rng_t = rng if timing_seed is None else np.random.default_rng(timing_seed)
     robot, (kl, kr, kb) = sc.robot, sc.scales
     track_true = kb * robot.track_width
     tpm_true = (kl * robot.ticks_per_meter_left, kr * robot.ticks_per_meter_right)
@@ -94,7 +101,7 @@ def simulate(sc: Scenario, seed: int = 0) -> Log:
     log_parts = {}
 
     # --- encoders: noisy distance per interval (eq. 41), then integer ticks.
-    te = _sensor_times(rng, R.encoders, 0.0, t_end, R.jitter)
+    te = _sensor_times(rng_t, R.encoders, 0.0, t_end, R.jitter)
     a, b = robot.encoder_sigma
     noisy = []
     for dist, tpm in ((dist_l, tpm_true[0]), (dist_r, tpm_true[1])):
@@ -109,7 +116,7 @@ def simulate(sc: Scenario, seed: int = 0) -> Log:
     log_parts["encoders"] = Encoders(te, noisy[0], noisy[1])
 
     # --- gyro: true rate + (drifting) bias + white noise (eq. 10, 40).
-    tg = _sensor_times(rng, R.gyro, 0.0, t_end, R.jitter)
+    tg = _sensor_times(rng_t, R.gyro, 0.0, t_end, R.jitter)
     if tg.size:
         bias_f = sc.gyro_bias + np.concatenate([[0.0], np.cumsum(rng.normal(size=tf.size - 1))]) \
             * sc.gyro_bias_walk * np.sqrt(dt)
@@ -122,7 +129,7 @@ def simulate(sc: Scenario, seed: int = 0) -> Log:
         return np.interp(t, tf, x), np.interp(t, tf, y), np.interp(t, tf, th)
 
     # --- GPS: antenna position with lever arm (eq. 8) + noise (eq. 39).
-    tp = _sensor_times(rng, R.gps, 0.0, t_end, R.jitter)
+    tp = _sensor_times(rng_t, R.gps, 0.0, t_end, R.jitter)
     if tp.size:
         h, _ = gps_model.antenna_position(*pose_at(tp), robot.gps_lever_arm)
         h = h + rng.normal(size=h.shape) * robot.gps_sigma
@@ -131,7 +138,7 @@ def simulate(sc: Scenario, seed: int = 0) -> Log:
     # --- ranges: beacons polled round-robin, each at R.ranges Hz (eq. 12).
     nb = len(robot.beacons)
     if R.ranges > 0 and nb:
-        tr = _sensor_times(rng, R.ranges * nb, 0.0, t_end, R.jitter)
+        tr = _sensor_times(rng_t, R.ranges * nb, 0.0, t_end, R.jitter)
         which = np.arange(tr.size) % nb
         bxy = np.asarray([[bc.x, bc.y] for bc in robot.beacons])[which]
         h, _ = ranging.beacon_range(*pose_at(tr), bxy, robot.range_lever_arm)
@@ -139,7 +146,7 @@ def simulate(sc: Scenario, seed: int = 0) -> Log:
         log_parts["ranges"] = Ranges(tr, which, r)
 
     # --- body-velocity sensor (visual odometry, sec. VI-B).
-    tv = _sensor_times(rng, R.velocity, 0.0, t_end, R.jitter)
+    tv = _sensor_times(rng_t, R.velocity, 0.0, t_end, R.jitter)
     if tv.size:
         sv, sw = robot.velocity_sigma
         log_parts["velocity"] = Velocity(tv, np.interp(tv, tf, v) + rng.normal(size=tv.size) * sv,

@@ -1,0 +1,238 @@
+"""The paper's EKF over many runs at once, vectorised over runs in numpy.
+
+A Monte-Carlo grid point filters N logs that differ only in their noise: same
+robot, same motion, same sensor timestamps (``simulate(..., timing_seed=)``).
+Their event streams are then identical, so one pass over the events can
+update all N states together: state (N, 11), covariance (N, 11, 11), the same
+``factors`` models (they broadcast) and the same equations as ``ekf.EKF``.
+Python's per-event overhead is paid once instead of N times. The result for
+each run equals ``run_ekf`` on that log to rounding (a test checks 1e-9).
+
+A run that diverges is reported as its EstimatorDivergedError and frozen;
+the others go on.
+"""
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+from factors import encoder, gps, gyro, pseudo, ranging, velocity
+from factors._math import wrap_angle
+from factors.motion import propagate
+from odomgraph import state as S
+from odomgraph.errors import EstimatorDivergedError
+from odomgraph.estimators.ekf import (_DOF, _ENC_IDX, _GYRO_IDX, _POSE_IDX, _SCALE_IDX, _SLIP_IDX, _VEL_IDX, GPS,
+                                      GYRO, RANGE, SENSOR_NAMES, WHEEL, EKFOptions, add_process_noise, event_stream,
+                                      make_estimate)
+from odomgraph.estimators.initial import initial_state
+from odomgraph.estimators.measurements import from_log, slip_intensity
+from odomgraph.estimators.result import Estimate
+from odomgraph.estimators.schedule import Hold, Schedule
+from odomgraph.io.log import Log
+
+_I = np.eye(S.N)
+
+
+def _inv_small(A: np.ndarray) -> np.ndarray:
+    """Inverse of a batch (N, m, m) of 1x1 or 2x2 matrices in closed form."""
+    m = A.shape[-1]
+    if m == 1:
+        return 1.0 / A
+    if m == 2:
+        a, b, c, d = A[:, 0, 0], A[:, 0, 1], A[:, 1, 0], A[:, 1, 1]
+        det = a * d - b * c
+        out = np.empty_like(A)
+        out[:, 0, 0], out[:, 0, 1], out[:, 1, 0], out[:, 1, 1] = d, -b, -c, a
+        return out / det[:, None, None]
+    return np.linalg.inv(A)
+
+
+def _check_same_timing(logs: list[Log], streams) -> None:
+    robot0 = logs[0].robot
+    t0, c0, r0 = streams[0]
+    for log, (t, c, r) in zip(logs[1:], streams[1:]):
+        if log.robot != robot0:
+            raise ValueError("run_ekf_many: every log must have the same robot.toml")
+        if t.shape != t0.shape or not (np.array_equal(t, t0) and np.array_equal(c, c0) and np.array_equal(r, r0)):
+            raise ValueError("run_ekf_many: the logs' sensor timestamps differ; simulate them with one timing_seed")
+
+
+def run_ekf_many(logs: list[Log], schedule: Schedule = Schedule(), options: EKFOptions = EKFOptions(),
+                 progress=None) -> list[Estimate | EstimatorDivergedError]:
+    """Filter N logs that share robot and timestamps; one result per log, in order."""
+    wall0 = time.perf_counter()
+    n = len(logs)
+    meas = [from_log(log) for log in logs]
+    inits = [initial_state(log.robot, m) for log, m in zip(logs, meas)]
+    if len({i.t for i in inits}) != 1:
+        raise ValueError("run_ekf_many: the runs start at different times (give robot.toml an [initial] pose)")
+    streams = [event_stream(m, inits[0].t) for m in meas]
+    _check_same_timing(logs, streams)
+    t_ev, code_ev, row_ev = streams[0]
+    r, m0, sch, opt = logs[0].robot, meas[0], schedule, options
+
+    # Measurements stacked over runs: (N, K, ...).
+    wheel_m = np.stack([m.wheel.m for m in meas])
+    wheel_s2 = np.stack([m.wheel.sigma for m in meas]) ** 2
+    gyro_z = np.stack([m.gyro[1] for m in meas])[..., None] if m0.gyro is not None else None
+    gps_z = np.stack([m.gps[1] for m in meas]) if m0.gps is not None else None
+    gps_s2 = np.stack([m.gps[2] for m in meas]) ** 2 if m0.gps is not None else None
+    rng_b = m0.ranges[1] if m0.ranges is not None else None
+    rng_z = np.stack([m.ranges[2] for m in meas])[..., None] if m0.ranges is not None else None
+    vel_z = np.stack([m.velocity[1] for m in meas]) if m0.velocity is not None else None
+
+    x = np.stack([i.x for i in inits])
+    P = np.stack([i.P for i in inits])
+    pn = r.process
+    q = dict(v=pn.accel**2, w=pn.yaw_accel**2, bias=pn.gyro_bias**2, scale=pn.scale**2)
+    q_slip = slip_intensity(pn, m0)
+    if not opt.slip_states:
+        q_slip = np.zeros((2, 2))
+        x[:, _SLIP_IDX] = 0.0
+        P[:, _SLIP_IDX, :] = 0.0
+        P[:, :, _SLIP_IDX] = 0.0
+    R_slip = np.eye(2) * pn.pseudo_slip_sigma**2
+    R_scale = np.eye(3) * pn.pseudo_scale_sigma**2
+    R_gyro = np.array([[r.gyro_sigma**2]])
+    R_vel = np.diag(np.square(r.velocity_sigma))
+    R_rng = np.array([[r.range_sigma**2]])
+    track, lever_gps, lever_rng, gate = r.track_width, r.gps_lever_arm, r.range_lever_arm, opt.gate
+    t_switch = None if sch.calibrate_until is None else m0.t_start + sch.calibrate_until
+    switch_sigma = None
+    holding = False
+    rows = int(np.sum(code_ev == WHEEL))
+    out_x = np.empty((rows, n, S.N))
+    out_var = np.empty((rows, n, S.N))
+    out_pose = np.empty((rows, n, 3, 3))
+    out_t = np.empty(rows)
+    nis_t = {k: [] for k in range(5)}
+    nis_v = {k: [] for k in range(5)}
+    nis_ema = np.tile(np.asarray(_DOF, float), (n, 1))
+    rej_ema = np.zeros((n, 5))
+    nis_clip = np.array([10.0 * opt.max_mean_nis * d for d in _DOF])
+    seen = np.zeros(5, int)
+    failed: list[EstimatorDivergedError | None] = [None] * n
+    dead = np.zeros(n, bool)
+    frozen_x, frozen_P = x.copy(), P.copy()
+    t_now = inits[0].t
+    row = 0
+
+    def update(z, h, H, idx, R, use_gate=False):
+        """Batched Kalman update (see EKF.update); returns (N,) NIS, negative where gated."""
+        nonlocal x, P
+        Ht = np.swapaxes(H, 1, 2)
+        PHt = P[:, :, idx] @ Ht
+        Sm = H @ PHt[:, idx, :] + R
+        y = z - h
+        Sinv = _inv_small(Sm)
+        nis = np.einsum("ni,nij,nj->n", y, Sinv, y)
+        K = PHt @ Sinv
+        if use_gate and gate is not None:
+            rej = nis > gate
+            K[rej] = 0.0
+            nis = np.where(rej, -nis, nis)
+        if holding:
+            K[:, _SCALE_IDX, :] = 0.0
+        x = x + np.einsum("nij,nj->ni", K, y)
+        x[:, 2] = wrap_angle(x[:, 2])
+        IKH = np.broadcast_to(_I, P.shape).copy()
+        IKH[:, :, idx] -= K @ H
+        P = IKH @ P @ np.swapaxes(IKH, 1, 2) + K @ R @ np.swapaxes(K, 1, 2)
+        return nis
+
+    def kill(i: int, msg: str):
+        failed[i] = EstimatorDivergedError(msg)
+        dead[i] = True
+        frozen_x[i], frozen_P[i] = x[i], P[i]
+
+    stride = max(1, len(t_ev) // 200)
+    with np.errstate(all="ignore"):  # frozen (diverged) runs may overflow; they are reset below
+        for k in range(len(t_ev)):
+            t, code, i = t_ev[k], code_ev[k], row_ev[k]
+            dt = t - t_now
+            if dt > 0.0:
+                pose, J = propagate(x[:, 0], x[:, 1], x[:, 2], x[:, 3], x[:, 4], dt)
+                # F P F' with F = I except rows 0:3 = J (on the first 5 states)
+                P[:, 0:3, :] = J @ P[:, 0:5, :]
+                P[:, :, 0:3] = P[:, :, 0:5] @ np.swapaxes(J, 1, 2)
+                add_process_noise(P, J, dt, q, q_slip)
+                x[:, 0], x[:, 1], x[:, 2] = pose[:, 0], pose[:, 1], wrap_angle(pose[:, 2])
+                t_now = t
+            if switch_sigma is None and t_switch is not None and t >= t_switch:
+                switch_sigma = np.sqrt(np.diagonal(P, 0, 1, 2)[:, S.SCALE]).copy()
+                holding = sch.hold is Hold.consider
+            if code == WHEEL:
+                if switch_sigma is None and t_switch is not None:
+                    h, H = pseudo.zero_slip(x[:, 6], x[:, 7])                        # eq. 35-36
+                    update(np.zeros((n, 2)), h, H, _SLIP_IDX, R_slip)
+                elif switch_sigma is not None and sch.hold is Hold.pseudo:
+                    h, H = pseudo.hold_scale(x[:, 8], x[:, 9], x[:, 10])             # eq. 37-38
+                    update(h.copy(), h, H, _SCALE_IDX, R_scale)
+                h, H = encoder.wheel_speeds(x[:, 3], x[:, 4], x[:, 6], x[:, 7], x[:, 8], x[:, 9], x[:, 10],
+                                            track)                                    # eq. 29-34
+                s2 = wheel_s2[:, i]
+                Rw = np.zeros((n, 2, 2))
+                Rw[:, 0, 0], Rw[:, 1, 1] = s2[:, 0], s2[:, 1]
+                nis = update(wheel_m[:, i], h, H, _ENC_IDX, Rw)
+                d = np.diagonal(P, 0, 1, 2)
+                bad = ~(np.isfinite(x).all(1) & np.isfinite(d).all(1)) | (d < -1e-12).any(1)
+                far = np.abs(x[:, S.SCALE] - 1.0).max(1) > opt.max_scale_error
+                for j in np.nonzero((bad | far) & ~dead)[0]:
+                    kill(j, f"EKF diverged at t={t:.3f} s: " + (
+                        "non-finite state or covariance" if bad[j] else
+                        f"scale factors {np.round(x[j, S.SCALE], 3).tolist()} are more than "
+                        f"{opt.max_scale_error:.0%} from 1"))
+                out_t[row] = t
+                out_x[row] = x
+                out_var[row] = np.diagonal(P, 0, 1, 2)
+                out_pose[row] = P[:, 0:3, 0:3]
+                row += 1
+            elif code == GYRO:
+                h, H = gyro.yaw_rate(x[:, 4], x[:, 5])                               # eq. 10-11
+                nis = update(gyro_z[:, i], h, H, _GYRO_IDX, R_gyro)
+            elif code == GPS:
+                h, H = gps.antenna_position(x[:, 0], x[:, 1], x[:, 2], lever_gps)    # eq. 8-9
+                Rg = np.eye(2) * gps_s2[:, i, None, None]
+                nis = update(gps_z[:, i], h, H, _POSE_IDX, Rg, use_gate=True)
+            elif code == RANGE:
+                h, H = ranging.beacon_range(x[:, 0], x[:, 1], x[:, 2], rng_b[i], lever_rng)  # eq. 12-16
+                nis = update(rng_z[:, i], h, H[:, :, :3], _POSE_IDX, R_rng, use_gate=True)
+            else:
+                h, H = velocity.body_velocity(x[:, 3], x[:, 4])                      # sec. VI-B
+                nis = update(vel_z[:, i], h, H, _VEL_IDX, R_vel, use_gate=True)
+            nis_t[code].append(t)
+            nis_v[code].append(nis)
+            # Divergence watch, per run, as in EKF.run.
+            rejected = nis < 0
+            nk = np.minimum(np.where(rejected, gate if gate is not None else 0.0, nis), nis_clip[code])
+            nis_ema[:, code] = 0.98 * nis_ema[:, code] + 0.02 * nk
+            rej_ema[:, code] = 0.98 * rej_ema[:, code] + 0.02 * rejected
+            seen[code] += 1
+            if seen[code] > 100:
+                lost = (nis_ema[:, code] > opt.max_mean_nis * _DOF[code]) | (rej_ema[:, code] > 0.5)
+                for j in np.nonzero(lost & ~dead)[0]:
+                    what = (f"the running mean NIS of {SENSOR_NAMES[code]} is {nis_ema[j, code]:.0f} "
+                            f"(expected {_DOF[code]})" if not rej_ema[j, code] > 0.5 else
+                            f"the gate rejects {rej_ema[j, code]:.0%} of {SENSOR_NAMES[code]}")
+                    kill(j, f"EKF diverged at t={t:.3f} s: {what}; the model no longer explains the data")
+            if dead.any():
+                x[dead], P[dead] = frozen_x[dead], frozen_P[dead]
+            if progress is not None and k % stride == 0:
+                progress(k, len(t_ev))
+    if progress is not None:
+        progress(len(t_ev), len(t_ev))
+
+    wall = (time.perf_counter() - wall0) / n
+    n_up = len(t_ev)
+    nis_arr = {c: np.asarray(v) for c, v in nis_v.items() if v}
+    out: list[Estimate | EstimatorDivergedError] = []
+    for j in range(n):
+        if failed[j] is not None:
+            out.append(failed[j])
+            continue
+        nis_j = {c: list(zip(nis_t[c], nis_arr[c][:, j])) for c in nis_arr}
+        out.append(make_estimate("ekf" if opt.slip_states else "ekf-no-slip", out_t, out_x[:, j], out_var[:, j],
+                                 out_pose[:, j], nis_j, list(meas[j].notes) + [inits[j].note], wall, n_up,
+                                 t_switch, None if switch_sigma is None else switch_sigma[j], sch.hold))
+    return out
