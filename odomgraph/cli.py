@@ -144,6 +144,8 @@ def _print_summary(s: dict) -> None:
         u = s["update_time_ms"]
         typer.echo(f"  update time: mean {u['mean']:.2f} ms, first 10% {u['first_10pct']:.2f} ms, "
                    f"last 10% {u['last_10pct']:.2f} ms")
+    for b, v in s.get("range_bias", {}).items():
+        typer.echo(f"  range bias {b:<8} {v['value']:+.3f} ± {v['sigma']:.3f} m")
     for n in s["notes"]:
         typer.echo(f"  note: {n}")
 
@@ -255,6 +257,9 @@ def estimate(
     = None,
     robust_k: Annotated[Optional[float], typer.Option(
         help="Threshold of the robust loss in sigmas (default: 1.345 Huber, 2.385 Cauchy).")] = None,
+    range_bias: Annotated[bool, typer.Option(
+        "--range-bias", help="batch: also estimate a constant range bias per beacon (UWB antenna delay).")]
+    = False,
 ):
     """Estimate states and odometry errors of a log; writes states.csv, trajectory.tum, summary.json
     (and online.csv, the causal estimate, for isam2).
@@ -270,7 +275,8 @@ def estimate(
     with _Progress(f"{method.value}") as bar:
         s = estimate_to_dir(log, output, Method(method.value), schedule, progress=bar, gate=gate,
                             keyframe_hz=keyframe_hz, lag=lag, slip_cauchy=slip_cauchy,
-                            robust=robust.value if robust else None, robust_k=robust_k)
+                            robust=robust.value if robust else None, robust_k=robust_k,
+                            range_bias=range_bias or None)
     _print_summary(s)
     typer.echo(f"wrote {output}")
 
@@ -378,6 +384,9 @@ def calibrate(
     calibrate_until: Annotated[str, typer.Option(
         help="'none' (default): slip and scale together with a sparse slip prior; or seconds of "
              "slip-free driving at the start.")] = "none",
+    tune: Annotated[bool, typer.Option(
+        "--tune/--no-tune", help="Choose the velocity process noise by predicting held-out fixes "
+                                 "(default on; it is written to the [process] table).")] = True,
 ):
     """Estimate corrected ticks per metre and track width from a calibration log and write them
     (with their 1-sigma) as a robot.toml. Run it once after changing tyres."""
@@ -389,7 +398,7 @@ def calibrate(
     schedule = _parse_schedule(calibrate_until, HoldName.consider)
     log = read_log(log_dir)
     with _Progress(f"calibrate ({method.value})") as bar:
-        new, rep = run_calibration(log, schedule, Method(method.value), progress=bar)
+        new, rep = run_calibration(log, schedule, Method(method.value), progress=bar, tune=tune)
     extra = {"calibration": {
         "from_log": str(log_dir), "method": rep["method"],
         "ticks_per_meter_left_sigma": rep["ticks_per_meter_left"]["sigma"],
@@ -404,6 +413,11 @@ def calibrate(
                      ("ticks_per_meter_right", r.ticks_per_meter_right), ("track_width", r.track_width)):
         v = rep[key]
         typer.echo(f"{key:<22} {old:.6g} -> {v['value']:.6g} ± {v['sigma']:.2g}")
+    pn = rep["process_noise"]
+    if pn["held_out_rms_m"]:
+        cv = ", ".join(f"x{r['factor']:g}: {100 * r['rms_m']:.2f} cm" for r in pn["held_out_rms_m"])
+        typer.echo(f"process noise: accel {pn['accel']:.3g} m/s^2/sqrt(Hz), yaw {pn['yaw_accel']:.3g} rad/s^2/sqrt(Hz) "
+                   f"(held-out fix error by multiple of the default: {cv})")
     a, b = rep["dead_reckoning_nominal"], rep["dead_reckoning_calibrated"]
     typer.echo(f"dead reckoning on this log (vs {rep['reference']}): RMS {a['rms_m']:.3f} -> {b['rms_m']:.3f} m, "
                f"final {a['final_m']:.3f} -> {b['final_m']:.3f} m")

@@ -95,7 +95,7 @@ def test_batch_equals_the_straightforward_gtsam_solution():
     opt = SmootherOptions(slip_cauchy=None)
     prob = B.build_problem(log, sch, opt)
     pose, W = B.initial_guess(prob, run_ekf(log, sch))
-    ours_pose, ours_W, _, _ = B.solve(prob, pose, W, opt)
+    ours_pose, ours_W, _, _, _ = B.solve(prob, pose, W, opt)
     g = straightforward_graph(prob)
     params = gtsam.LevenbergMarquardtParams()
     params.setRelativeErrorTol(1e-12)

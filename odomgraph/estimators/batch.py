@@ -49,6 +49,13 @@ class SmootherOptions:
     """Cauchy scale [m/s] of the sparse zero-slip prior outside the calibration
     window (the whole log with ``calibrate_until=None``). None: no prior there,
     slip is a free random walk after the window as in the EKF."""
+    range_bias: bool = False
+    """Estimate a constant range bias per beacon (UWB antenna delays, NLOS offsets)."""
+    range_bias_sigma: float = 0.5
+    """Prior 1-sigma of each range bias [m]."""
+    velocity_loss: str | None = None
+    """Robust loss of the velocity random walk ("huber", "cauchy"; None: Gaussian).
+    For robots whose speed jumps (in-place pivots started and stopped at once)."""
 
 
 def build_problem(log: Log, schedule: Schedule, options: SmootherOptions) -> Problem:
@@ -69,8 +76,12 @@ def build_problem(log: Log, schedule: Schedule, options: SmootherOptions) -> Pro
     else:
         zero = mid < meas.t_start + schedule.calibrate_until
     robust = options.slip_cauchy
+    if options.range_bias and not (kf.rng_k.size and log.robot.beacons):
+        from odomgraph.errors import OdomgraphError
+        raise OdomgraphError("--range-bias: the log has no ranges to estimate a bias from")
     return Problem(kf, log.robot, mean, cov, zero, robust, slip_intensity(log.robot.process, meas), options.robust,
-                   options.robust_k)
+                   options.robust_k, options.range_bias_sigma if options.range_bias else None,
+                   options.velocity_loss)
 
 
 def initial_guess(prob: Problem, ekf: Estimate) -> tuple[np.ndarray, np.ndarray]:
@@ -119,13 +130,24 @@ def gaussian_graph(prob: Problem, lin: Linearization) -> gtsam.GaussianFactorGra
     unit = gtsam.noiseModel.Unit.Create(A1.shape[1])
     for k in range(prob.kf.n - 1):
         g.add(gtsam.JacobianFactor(k, A1[k], k + 1, A2[k], b[k], unit))
+    if prob.n_bias:
+        # The bias vector is one more variable, key n, eliminated last: each
+        # interval's ranges become one factor on (k, n).
+        n, kr = prob.kf.n, prob.kf.rng_k
+        g.add(gtsam.JacobianFactor(n, lin.A_bp, lin.b_bp, gtsam.noiseModel.Unit.Create(prob.n_bias)))
+        if lin.A_r is not None:
+            cuts = np.flatnonzero(np.diff(kr)) + 1
+            for sel in np.split(np.arange(kr.size), cuts):
+                g.add(gtsam.JacobianFactor(int(kr[sel[0]]), lin.A_r[sel], n, lin.A_rb[sel], lin.b_r[sel],
+                                           gtsam.noiseModel.Unit.Create(sel.size)))
     return g
 
 
-def time_ordering(n: int) -> gtsam.Ordering:
-    """Keyframes in time order: the chain eliminates with no fill."""
+def time_ordering(n: int, n_global: int = 0) -> gtsam.Ordering:
+    """Keyframes in time order (the chain eliminates with no fill), then the
+    global variables (keys n, n+1, ...) last."""
     o = gtsam.Ordering()
-    for k in range(n):
+    for k in range(n + n_global):
         o.push_back(k)
     return o
 
@@ -136,7 +158,10 @@ def retract(pose: np.ndarray, W: np.ndarray, d: np.ndarray):
 
 
 def solve(prob: Problem, pose: np.ndarray, W: np.ndarray, options: SmootherOptions, progress=None):
-    """Gauss-Newton with a backtracking line search. Returns (pose, W, iterations, cost).
+    """Gauss-Newton with a backtracking line search.
+
+    Returns (pose, W, iterations, cost, range_bias); range_bias is None
+    unless the problem estimates it.
 
     Not Levenberg-Marquardt with Marquardt damping: the scale factors are
     per-keyframe copies tied by very tight random-walk factors, so diag(A^T A)
@@ -145,49 +170,91 @@ def solve(prob: Problem, pose: np.ndarray, W: np.ndarray, options: SmootherOptio
     in a flat valley). Started near the answer (from the EKF), full
     Gauss-Newton steps with step halving converge in a few iterations.
     """
-    n = prob.kf.n
-    order = time_ordering(n)
-    lin = linearize(prob, pose, W)
+    n, nb = prob.kf.n, prob.n_bias
+    order = time_ordering(n, 1 if nb else 0)
+    rb = np.zeros(nb) if nb else None
+    lin = linearize(prob, pose, W, range_bias=rb)
     it = 0
     for it in range(1, options.max_iterations + 1):
         if progress is not None:
             progress(it, options.max_iterations)
         vv = gaussian_graph(prob, lin).optimize(order, gtsam.EliminateQR)
         d = np.stack([vv.at(k) for k in range(n)])
-        if not np.all(np.isfinite(d)):
+        db = vv.at(n) if nb else None
+        if not (np.all(np.isfinite(d)) and (db is None or np.all(np.isfinite(db)))):
             raise EstimatorDivergedError(f"batch smoother diverged at iteration {it}: non-finite step")
         alpha = 1.0
         while True:
             pose_n, W_n = retract(pose, W, alpha * d)
-            lin_n = linearize(prob, pose_n, W_n)
+            rb_n = rb + alpha * db if nb else None
+            lin_n = linearize(prob, pose_n, W_n, range_bias=rb_n)
             if lin_n.cost <= lin.cost or alpha < 1e-3:
                 break
             alpha *= 0.5
         if lin_n.cost > lin.cost:
             break  # no descent left along the Gauss-Newton direction: converged
         decrease = (lin.cost - lin_n.cost) / max(lin.cost, 1e-300)
-        pose, W, lin = pose_n, W_n, lin_n
+        pose, W, rb, lin = pose_n, W_n, rb_n, lin_n
         if decrease < options.rel_tol:
             break
-    return pose, W, it, lin.cost
+    return pose, W, it, lin.cost, rb
 
 
-def marginal_blocks(prob: Problem, pose: np.ndarray, W: np.ndarray) -> np.ndarray:
-    """(N, 11, 11) marginal covariance of each keyframe block (pose part in the body frame)."""
-    lin = linearize(prob, pose, W)
+def marginal_blocks(prob: Problem, pose: np.ndarray, W: np.ndarray, range_bias: np.ndarray | None = None):
+    """(N, 11, 11) marginal covariance of each keyframe block (pose part in the body frame).
+
+    With range biases (a global variable g eliminated last) the recursion
+    carries the cross-covariance with g: for the conditional
+    x_k = R^-1 (d - S [x_{k+1}; g]),
+        Sigma_k  = R^-1 R^-T + A Sigma_yy A^T,   Sigma_kg = -A Sigma_yg,   A = R^-1 S,
+    with y the conditional's parents. Then returns (blocks, Sigma_gg).
+    """
+    lin = linearize(prob, pose, W, range_bias=range_bias)
     g = gaussian_graph(prob, lin)
-    n = prob.kf.n
-    bn = g.eliminateSequential(time_ordering(n), gtsam.EliminateQR)
+    n, nb = prob.kf.n, prob.n_bias
+    bn = g.eliminateSequential(time_ordering(n, 1 if nb else 0), gtsam.EliminateQR)
     Sig = np.empty((n, NB, NB))
-    c = bn.at(n - 1)
-    Rinv = np.linalg.inv(c.R())
-    Sig[n - 1] = Rinv @ Rinv.T
-    for k in range(n - 2, -1, -1):
+    if not nb:
+        c = bn.at(n - 1)
+        Rinv = np.linalg.inv(c.R())
+        Sig[n - 1] = Rinv @ Rinv.T
+        for k in range(n - 2, -1, -1):
+            c = bn.at(k)
+            Rinv = np.linalg.inv(c.R())
+            A = Rinv @ c.S()
+            Sig[k] = Rinv @ Rinv.T + A @ Sig[k + 1] @ A.T
+        return Sig
+    Rg = np.linalg.inv(bn.at(n).R())
+    Sgg = Rg @ Rg.T
+    cross = np.zeros((n, NB, nb))     # Sigma_{k, g}
+    for k in range(n - 1, -1, -1):
         c = bn.at(k)
+        keys = list(c.keys())[1:]
         Rinv = np.linalg.inv(c.R())
         A = Rinv @ c.S()
-        Sig[k] = Rinv @ Rinv.T + A @ Sig[k + 1] @ A.T
-    return Sig
+        blocks = {n: (Sgg, None)}
+        if k + 1 < n:
+            blocks[k + 1] = (Sig[k + 1], cross[k + 1])
+        # Sigma_yy and Sigma_yg over the parents, in the conditional's key order.
+        dims = [NB if key < n else nb for key in keys]
+        m = sum(dims)
+        Syy = np.zeros((m, m))
+        Syg = np.zeros((m, nb))
+        off = np.cumsum([0] + dims)
+        for a, ka in enumerate(keys):
+            sa = slice(off[a], off[a + 1])
+            Syg[sa] = Sgg if ka == n else cross[ka]
+            for b_, kb in enumerate(keys):
+                sb = slice(off[b_], off[b_ + 1])
+                if ka == kb:
+                    Syy[sa, sb] = Sgg if ka == n else Sig[ka]
+                elif ka == n:
+                    Syy[sa, sb] = cross[kb].T
+                else:
+                    Syy[sa, sb] = cross[ka]
+        Sig[k] = Rinv @ Rinv.T + A @ Syy @ A.T
+        cross[k] = -A @ Syg
+    return Sig, Sgg
 
 
 def keyframe_rows(prob: Problem, pose: np.ndarray, W: np.ndarray, Sig: np.ndarray | None, method: str,
@@ -229,11 +296,16 @@ def run_batch(log: Log, schedule: Schedule = Schedule(), options: SmootherOption
     ekf_schedule = schedule if schedule.calibrate_until is not None else Schedule(20.0)
     ekf = initial if initial is not None else run_ekf(log, ekf_schedule)
     pose, W = initial_guess(prob, ekf)
-    pose, W, iters, cost = solve(prob, pose, W, options, progress)
+    pose, W, iters, cost, rb = solve(prob, pose, W, options, progress)
     if not (np.all(np.isfinite(pose)) and np.all(np.isfinite(W))):
         raise EstimatorDivergedError("batch smoother diverged: non-finite estimate")
-    Sig = marginal_blocks(prob, pose, W)
+    Sig = marginal_blocks(prob, pose, W, rb)
+    if rb is not None:
+        Sig, Sgg = Sig
     est = keyframe_rows(prob, pose, W, Sig, "batch")
+    if rb is not None:
+        est.range_bias = {b.id: {"value": float(v), "sigma": float(np.sqrt(Sgg[i, i]))}
+                          for i, (b, v) in enumerate(zip(log.robot.beacons, rb))}
     est.wall_time_s = time.perf_counter() - wall0
     est.n_updates = _n_measurements(prob)
     t0 = from_log(log).t_start

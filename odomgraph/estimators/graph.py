@@ -56,12 +56,24 @@ class Problem:
     """Robust loss of GPS fixes and ranges: None, "huber" or "cauchy" (real data has outliers)."""
     robust_k: float | None = None
     """Its threshold in sigmas (default: 1.345 for Huber, 2.385 for Cauchy: 95 % efficiency)."""
+    range_bias_sigma: float | None = None
+    """Prior 1-sigma [m] of a constant range bias per beacon, estimated as one
+    global variable (a vector, one entry per robot.beacons); None: no bias."""
+    velocity_loss: str | None = None
+    """Robust loss ("huber" or "cauchy") of the v and omega random-walk steps; None: Gaussian."""
+
+    @property
+    def n_bias(self) -> int:
+        return len(self.robot.beacons) if self.range_bias_sigma is not None else 0
 
     def __post_init__(self):
         kf = self.kf
-        # Fixed row layout of the unary factor of each interval.
+        # Fixed row layout of the unary factor of each interval. With range
+        # biases, ranges leave it: their rows also touch the global bias.
         self.g_max = int(np.bincount(kf.gps_k, minlength=kf.n - 1).max()) if kf.gps_k.size else 0
         self.r_max = int(np.bincount(kf.rng_k, minlength=kf.n - 1).max()) if kf.rng_k.size else 0
+        if self.range_bias_sigma is not None:
+            self.r_max = 0
         self.rows_unary = 2 + 1 + 2 + 2 + 2 * self.g_max + self.r_max
         self.gps_slot = _slots(kf.gps_k)
         self.rng_slot = _slots(kf.rng_k)
@@ -136,10 +148,20 @@ class Linearization:
     b_p: np.ndarray
     cost: float
     """0.5 * sum of squared whitened residuals (robust-weighted where robust)."""
+    A_r: np.ndarray | None = None
+    """With range biases: (R, 11) range rows on the block of interval ``kf.rng_k``."""
+    A_rb: np.ndarray | None = None
+    """(R, B) the same rows on the bias vector."""
+    b_r: np.ndarray | None = None
+    A_bp: np.ndarray | None = None
+    """(B, B) prior rows on the bias vector."""
+    b_bp: np.ndarray | None = None
 
 
-def linearize(prob: Problem, pose: np.ndarray, W: np.ndarray, k0: int = 0, k1: int | None = None) -> Linearization:
-    """Whitened linearisation at the estimate (pose (N, 3) world, W (N, 8)).
+def linearize(prob: Problem, pose: np.ndarray, W: np.ndarray, k0: int = 0, k1: int | None = None,
+              range_bias: np.ndarray | None = None) -> Linearization:
+    """Whitened linearisation at the estimate (pose (N, 3) world, W (N, 8),
+    range_bias (B,) [m] when prob.range_bias_sigma is set).
 
     Only the intervals k0 <= k < k1 (default: all) are linearised, reading
     keyframes k0..k1; the incremental smoothers linearise one new interval at a
@@ -218,10 +240,15 @@ def linearize(prob: Problem, pose: np.ndarray, W: np.ndarray, k0: int = 0, k1: i
             A_u[k, rows + j, OM] = Jt[:, j, 4] * inv[:, 0]
     # --- ranges (eq. 12-16), likewise.
     q0, q1 = np.searchsorted(kf.rng_k, [k0, k1])
+    A_r = A_rb = b_r = A_bp = b_bp = None
+    nb = prob.n_bias
+    if nb and range_bias is None:
+        range_bias = np.zeros(nb)
     if q1 > q0:
         k = kf.rng_k[q0:q1] - k0
         p, Jf = propagate(x[k], y[k], th[k], w[k, 0], w[k, 1], kf.rng_tau[q0:q1])
-        h, Jh = ranging.beacon_range(p[:, 0], p[:, 1], p[:, 2], kf.rng_beacon[q0:q1], r.range_lever_arm)
+        bias = range_bias[kf.rng_id[q0:q1]] if nb else 0.0
+        h, Jh = ranging.beacon_range(p[:, 0], p[:, 1], p[:, 2], kf.rng_beacon[q0:q1], r.range_lever_arm, bias)
         Jt = Jh[:, :, :3] @ Jf
         inv = np.full(q1 - q0, 1.0 / r.range_sigma)
         if prob.robust is not None:
@@ -229,11 +256,22 @@ def linearize(prob: Problem, pose: np.ndarray, W: np.ndarray, k0: int = 0, k1: i
             sw, rho = robust_weight(u, prob.robust, prob.robust_k or ROBUST_K[prob.robust])
             robust_cost += float(np.sum(rho - 0.5 * (sw * u) ** 2))
             inv = inv * sw
-        rows = 7 + 2 * prob.g_max + prob.rng_slot[q0:q1]
-        b_u[k, rows] = -(h[:, 0] - kf.rng_z[q0:q1]) * inv
-        A_u[k, rows, 0:3] = pose2.to_body(Jt[:, :, 0:3], th[k])[:, 0] * inv[:, None]
-        A_u[k, rows, V] = Jt[:, 0, 3] * inv
-        A_u[k, rows, OM] = Jt[:, 0, 4] * inv
+        rb = -(h[:, 0] - kf.rng_z[q0:q1]) * inv
+        ra = np.zeros((q1 - q0, NB))
+        ra[:, 0:3] = pose2.to_body(Jt[:, :, 0:3], th[k])[:, 0] * inv[:, None]
+        ra[:, V] = Jt[:, 0, 3] * inv
+        ra[:, OM] = Jt[:, 0, 4] * inv
+        if nb:
+            A_r, b_r = ra, rb
+            A_rb = np.zeros((q1 - q0, nb))
+            A_rb[np.arange(q1 - q0), kf.rng_id[q0:q1]] = Jh[:, 0, 3] * inv
+        else:
+            rows = 7 + 2 * prob.g_max + prob.rng_slot[q0:q1]
+            b_u[k, rows] = rb
+            A_u[k, rows] = ra
+    if nb:
+        A_bp = np.eye(nb) / prob.range_bias_sigma
+        b_bp = -range_bias / prob.range_bias_sigma
 
     # --- motion: X_{k+1} against the arc of W_k's average velocity.
     nxt = pose[k0 + 1:k1 + 1]
@@ -250,6 +288,17 @@ def linearize(prob: Problem, pose: np.ndarray, W: np.ndarray, k0: int = 0, k1: i
     dW = W[k0 + 1:k1 + 1] - W[k0:k1]
     A_w = prob._rw_whiten[k0:k1]
     b_w = -np.einsum("kij,kj->ki", A_w, dW)
+    if prob.velocity_loss is not None:
+        # Robust velocity steps: a robot whose commanded speed jumps (pivots
+        # starting and stopping within one encoder period) breaks the Gaussian
+        # random walk, and a quadratic penalty on those jumps pulls the scale
+        # factors towards shrinking every velocity. v and omega have diagonal
+        # whiteners, so their rows are weighted one by one (IRLS).
+        sw, rho = robust_weight(b_w[:, 0:2], prob.velocity_loss, ROBUST_K[prob.velocity_loss])
+        robust_cost += float(np.sum(rho - 0.5 * (sw * b_w[:, 0:2]) ** 2))
+        A_w = A_w.copy()
+        A_w[:, 0:2, :] *= sw[:, :, None]
+        b_w[:, 0:2] *= sw
 
     # --- prior on keyframe 0 (world-frame covariance mapped to the body tangent).
     A_p = b_p = None
@@ -264,12 +313,14 @@ def linearize(prob: Problem, pose: np.ndarray, W: np.ndarray, k0: int = 0, k1: i
         b_p = -Lp @ d0
 
     cost = 0.5 * (np.sum(b_u**2) + np.sum(b_m**2) + np.sum(b_w**2) + (np.sum(b_p**2) if b_p is not None else 0.0))
+    if nb:
+        cost += 0.5 * (np.sum(b_bp**2) + (np.sum(b_r**2) if b_r is not None else 0.0))
     # IRLS rows carry weighted squares; robust_cost holds (true loss - weighted square).
     cost += robust_cost
     if prob.slip_robust is not None:
         free = ~prob.zero_slip[k0:k1]
         cost += slip_cost - 0.5 * np.sum(b_u[free, 5:7] ** 2)
-    return Linearization(A_u, b_u, A_m0, A_m1, b_m, A_w, b_w, A_p, b_p, float(cost))
+    return Linearization(A_u, b_u, A_m0, A_m1, b_m, A_w, b_w, A_p, b_p, float(cost), A_r, A_rb, b_r, A_bp, b_bp)
 
 
 def motion_sigma(kf: Keyframes, q_w: float) -> np.ndarray:

@@ -57,6 +57,8 @@ class Keyframes:
     """(R, 2) beacon position [m]."""
     rng_z: np.ndarray
     """(R,) measured range [m]."""
+    rng_id: np.ndarray | None = None
+    """(R,) index of the beacon in robot.beacons."""
 
     @property
     def dt(self) -> np.ndarray:
@@ -139,12 +141,13 @@ def build_keyframes(log: Log, t_start: float, keyframe_hz: float) -> Keyframes:
         gk, gt = k[inside], g.t[inside] - t[k[inside]]
         gxy = np.stack([g.x, g.y], -1)[inside]
         gs = (g.sigma if g.sigma is not None else np.full(len(g.t), r.gps_sigma))[inside]
-    rk = rt = rz = np.zeros(0)
+    rk = rt = rz = rid = np.zeros(0)
     rb = empty2
     if log.ranges is not None and len(log.ranges.t):
         rg = log.ranges
         k, inside = _bin(t, rg.t)
         rk, rt, rz = k[inside], rg.t[inside] - t[k[inside]], rg.range[inside]
         rb = np.asarray([[bc.x, bc.y] for bc in r.beacons])[rg.beacon[inside]]
+        rid = rg.beacon[inside]
     return Keyframes(t, m, sigma, gyro_z, np.asarray(gyro_n), vel_z, np.asarray(vel_n),
-                     gk.astype(int), gt, gxy, gs, rk.astype(int), rt, rb, rz)
+                     gk.astype(int), gt, gxy, gs, rk.astype(int), rt, rb, rz, np.asarray(rid, int))

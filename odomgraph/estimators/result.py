@@ -43,6 +43,8 @@ class Estimate:
     """For incremental smoothers: the causal estimate as it stood at each time."""
     update_times: np.ndarray | None = None
     """Wall time of each incremental update [s] (incremental smoothers)."""
+    range_bias: dict[str, dict[str, float]] | None = None
+    """Estimated constant range bias per beacon id, {"value", "sigma"} [m] (batch --range-bias)."""
 
     def __post_init__(self):
         n = len(self.t)
