@@ -3,8 +3,9 @@ x a 6x6 noise grid x 50 runs x 60 s logs, for the EKF and the batch smoother,
 on the local process pool. Target: <= 30 minutes on 2 cores.
 
 Each configuration's study directory is results/montecarlo/work/configN
-(resumable; not committed); its results.csv, results.json, heatmap and
-summary.html are copied to results/montecarlo/. The wall time, the paper's
+(resumable; not committed); its results.csv, heatmap and summary.html are
+copied to results/montecarlo/ (results.json, every run's scores, stays). The
+wall time, the paper's
 findings on our numbers and the smoother/EKF ratios go to
 results/montecarlo_study.{json,md}.
 
@@ -46,8 +47,9 @@ def main(argv=None):
         res = run_study(spec, work / f"config{config}", workers=args.workers, progress=progress)
         wall = time.perf_counter() - t0
         files = write_outputs(spec, res, work / f"config{config}")
-        for f in files:
-            shutil.copy(f, dest / (f.name if f.name.startswith("heatmap") else f"config{config}_{f.name}"))
+        for f in files:  # results.json (every run's scores, ~0.6 MB) stays in the work directory
+            if f.suffix != ".json":
+                shutil.copy(f, dest / (f.name if f.name.startswith("heatmap") else f"config{config}_{f.name}"))
         cpu = {k: sum(r.wall_s.get(k, 0.0) for r in res) for k in ("simulate", "ekf", "batch")}
         ratio = {}
         for q in QUANTITIES:
@@ -91,7 +93,8 @@ def main(argv=None):
         *frows,
         "",
         "Per configuration in `montecarlo/`: `heatmap_configN.png` (paper figs. 8-10 with the smoother and the "
-        "ratio), `configN_results.csv`, `configN_results.json` and `configN_summary.html`.",
+        "ratio), `configN_results.csv` and `configN_summary.html`; every run's scores are in "
+        "`work/configN/results.json` (not committed).",
     ])
     save("montecarlo_study", {"total_wall_s": total, "runs": args.runs, "grid": args.grid, "configs": out}, md)
 

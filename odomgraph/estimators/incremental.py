@@ -173,6 +173,10 @@ class _Runner:
     method = ""
 
     def __init__(self, log: Log, schedule: Schedule, options: IncrementalOptions):
+        if options.range_bias or options.velocity_loss is not None:
+            from odomgraph.errors import OdomgraphError
+            raise OdomgraphError(f"{self.method}: range biases and a robust velocity random walk are "
+                                 "batch-smoother options")
         self.log, self.schedule, self.options = log, schedule, options
         self.prob = build_problem(log, schedule, options)
         self.graph = _Graph(self.prob, options)
