@@ -105,7 +105,7 @@ def initial_guess(prob: Problem, ekf: Estimate) -> tuple[np.ndarray, np.ndarray]
 
 def _factor_arrays(prob: Problem, lin: Linearization):
     """Stack each interval's rows: A1 on block k, A2 on block k+1, b."""
-    n1 = prob.kf.n - 1
+    n1 = lin.A_u.shape[0]
     ru = lin.A_u.shape[1]
     rows = ru + 3 + 8
     A1 = np.zeros((n1, rows, NB))

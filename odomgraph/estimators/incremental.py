@@ -35,8 +35,8 @@ from factors._math import wrap_angle
 from factors.motion import propagate
 from odomgraph import state as St
 from odomgraph.errors import EstimatorDivergedError
-from odomgraph.estimators.batch import (SmootherOptions, build_problem, keyframe_rows, marginal_blocks,
-                                        _n_measurements)
+from odomgraph.estimators.batch import (SmootherOptions, _factor_arrays, _n_measurements, build_problem,
+                                        keyframe_rows, marginal_blocks, retract)
 from odomgraph.estimators.graph import NB, Problem, linearize
 from odomgraph.estimators.measurements import from_log
 from odomgraph.estimators.result import Estimate
@@ -225,6 +225,36 @@ class _Runner:
         return est
 
 
+#: ISAM2 boundary tangent order (X 3, W_KEY 6, S_KEY 2) -> keyframe block order (graph.py).
+_PERM = np.array([0, 1, 2] + [3 + i for i in W_IDX] + [3 + i for i in S_IDX])
+
+
+def _to_block(C: np.ndarray) -> np.ndarray:
+    """A covariance in ISAM2 boundary order, reordered to block order."""
+    out = np.empty_like(C)
+    out[np.ix_(_PERM, _PERM)] = C
+    return out
+
+
+def _block_values(vals) -> tuple[np.ndarray, np.ndarray]:
+    """(pose (3,) world, W (8,)) of the single keyframe in boundary ``vals``."""
+    keys = {chr(gtsam.Symbol(k).chr()): k for k in vals.keys()}
+    p = vals.atPose2(keys["x"])
+    W = np.empty(8)
+    W[W_IDX] = vals.atVector(keys["w"])
+    W[S_IDX] = vals.atVector(keys["s"])
+    return np.array([p.x(), p.y(), p.theta()]), W
+
+
+def _block_local(vals, pose: np.ndarray, W: np.ndarray) -> np.ndarray:
+    """(11,) tangent, block order, from the boundary ``vals`` to (pose, W)."""
+    p0, W0 = _block_values(vals)
+    d = np.empty(NB)
+    d[0:3] = gtsam.Pose2(*p0).localCoordinates(gtsam.Pose2(*pose))
+    d[3:] = W - W0
+    return d
+
+
 class ISAM2Runner(_Runner):
     method = "isam2"
 
@@ -320,7 +350,11 @@ class ISAM2Runner(_Runner):
         return g
 
     def _hand_over(self, b):
-        """Close the current ISAM2 at keyframe b and continue in a fresh one seeded at b."""
+        """Close the current ISAM2 at keyframe b and continue in a fresh one seeded at b.
+
+        The closed segment keeps only its estimate (keyframes k0..b) and the
+        hand-over marginal, not the ISAM2: the backward pass relinearises it
+        from those (``_smooth_segment``), so memory stays O(keyframes)."""
         # Settle the pending relinearisations while their factors are still here.
         remove, extra = [], gtsam.NonlinearFactorGraph()
         for j in range(self._relin_next, b):
@@ -331,7 +365,13 @@ class ISAM2Runner(_Runner):
         if extra.size():
             self.isam.update(extra, gtsam.Values(), remove)
         vals, cov = self._boundary(self.isam, b)
-        self.segments.append({"isam": self.isam, "k0": self.seg_start, "b": b, "vals": vals, "cov": cov})
+        # Full back-substitution of the closed segment (as in finish).
+        values = self.isam.calculateBestEstimate()
+        for k in range(self.seg_start, b + 1):
+            self._store(k, values)
+        self.segments.append({"k0": self.seg_start, "b": b, "vals": vals, "cov": _to_block(cov),
+                              "pose": self.pose[self.seg_start:b + 1].copy(),
+                              "W": self.W[self.seg_start:b + 1].copy()})
         new = gtsam.ISAM2(_params(self.options, reuse_slots=True))
         new.update(self._information_factor(vals, np.linalg.inv(cov), np.zeros(11)), gtsam.Values(vals))
         self.isam = new
@@ -339,31 +379,67 @@ class ISAM2Runner(_Runner):
         self._relin_next = b
         self.seg_start = b
 
+    def _smooth_segment(self, i: int, Lam_later: np.ndarray, eta_later: np.ndarray):
+        """One Gauss-Newton step over closed segment i, at the estimate it closed
+        with, given the later data's information about its last keyframe b
+        (0.5 d'Lam d - eta'd, block order, tangent at the hand-over values).
+        Writes keyframes k0..b-1; returns (block k0's new value as (pose, W),
+        its marginal covariance (11, 11), block order)."""
+        seg = self.segments[i]
+        k0, b = seg["k0"], seg["b"]
+        pose, W = self.pose.copy(), self.W.copy()
+        pose[k0:b + 1], W[k0:b + 1] = seg["pose"], seg["W"]
+        pose[b], W[b] = _block_values(seg["vals"])        # linearise the boundary where it was handed over
+        lin = linearize(self.prob, pose, W, k0, b)
+        A1, A2, rhs = _factor_arrays(self.prob, lin)
+        g = gtsam.GaussianFactorGraph()
+        unit = gtsam.noiseModel.Unit.Create(A1.shape[1])
+        for j in range(b - k0):
+            g.add(gtsam.JacobianFactor(j, A1[j], j + 1, A2[j], rhs[j], unit))
+        if k0 == 0:
+            g.add(gtsam.JacobianFactor(0, lin.A_p, lin.b_p, gtsam.noiseModel.Unit.Create(NB)))
+        else:
+            # The hand-over prior this segment started from, at its current estimate of k0.
+            prev = self.segments[i - 1]
+            d0 = _block_local(prev["vals"], pose[k0], W[k0])
+            L = np.linalg.cholesky(np.linalg.inv(prev["cov"])).T
+            g.add(gtsam.JacobianFactor(0, L, -L @ d0, gtsam.noiseModel.Unit.Create(NB)))
+        d, V = np.linalg.eigh(0.5 * (Lam_later + Lam_later.T))
+        keep = d > 1e-9 * max(d.max(), 1e-300)
+        if keep.any():
+            A = np.sqrt(d[keep])[:, None] * V[:, keep].T
+            g.add(gtsam.JacobianFactor(b - k0, A, (V[:, keep].T @ eta_later) / np.sqrt(d[keep]),
+                                       gtsam.noiseModel.Unit.Create(int(keep.sum()))))
+        order = gtsam.Ordering()
+        for j in range(b - k0, -1, -1):       # reverse time: no fill, and k0 is eliminated last
+            order.push_back(j)
+        bn = g.eliminateSequential(order, gtsam.EliminateQR)
+        sol = bn.optimize()
+        step = np.stack([sol.at(j) for j in range(b - k0 + 1)])
+        new_pose, new_W = retract(pose[k0:b + 1], W[k0:b + 1], step)
+        self.pose[k0:b], self.W[k0:b] = new_pose[:-1], new_W[:-1]
+        Rinv = np.linalg.inv(bn.at(bn.size() - 1).R())
+        return (new_pose[0], new_W[0]), Rinv @ Rinv.T
+
     def finish(self) -> Estimate:
         # Full back-substitution: the wildfire threshold (1e-3) would leave older
         # keyframes with scale-factor copies that are stale by up to 1e-3.
         values = self.isam.calculateBestEstimate()
         for k in range(self.seg_start, self.prob.kf.n):
             self._store(k, values)
-        later = self.isam
+        if self.segments:
+            fin_vals, cov_f = self._boundary(self.isam, self.seg_start)
+            fin = _block_values(fin_vals)
+            cov_f = _to_block(cov_f)
         # Backward pass over the segments: the later data's information about
         # each boundary, Sigma_final^-1 - Sigma_handoff^-1 (at the handoff
         # point), is exactly what the earlier segment has not seen.
-        for seg in reversed(self.segments):
-            b, vals, cov_h = seg["b"], seg["vals"], seg["cov"]
-            fin_vals, cov_f = self._boundary(later, b)
-            delta = np.concatenate([
-                vals.atPose2(X_KEY(b)).localCoordinates(fin_vals.atPose2(X_KEY(b))),
-                fin_vals.atVector(W_KEY(b)) - vals.atVector(W_KEY(b)),
-                fin_vals.atVector(S_KEY(b)) - vals.atVector(S_KEY(b))])
+        for i in range(len(self.segments) - 1, -1, -1):
+            seg = self.segments[i]
+            delta = _block_local(seg["vals"], *fin)
             inf_f = np.linalg.inv(cov_f)
-            isam = seg["isam"]
-            isam.update(self._information_factor(vals, inf_f - np.linalg.inv(cov_h), inf_f @ delta),
-                        gtsam.Values())
-            values = isam.calculateBestEstimate()
-            for k in range(seg["k0"], b):
-                self._store(k, values)
-            later = isam
+            fin, cov_f = self._smooth_segment(i, inf_f - np.linalg.inv(seg["cov"]), inf_f @ delta)
+        self.segments = [{"k0": s["k0"], "b": s["b"]} for s in self.segments]
         Sig = marginal_blocks(self.prob, self.pose, self.W)
         est = keyframe_rows(self.prob, self.pose, self.W, Sig, "isam2")
         est.calibration_sigma = np.sqrt(np.diagonal(Sig[-1])[8:11])
