@@ -92,10 +92,10 @@ def straightforward_graph(prob, k0: int = 0, k1: int | None = None):
             g.add(gf.velocity_factor(WK(k), kf.vel_z[k], gtsam.noiseModel.Diagonal.Sigmas(
                 np.asarray(r.velocity_sigma) / np.sqrt(kf.vel_n[k]))))
         for i in range(*np.searchsorted(kf.gps_k, [k, k + 1])):
-            g.add(gf.gps_factor(XK(k), WK(k), kf.gps_xy[i], kf.gps_tau[i], r.gps_lever_arm,
+            g.add(gf.gps_factor(XK(k), WK(k), kf.gps_xy[i], kf.gps_tau_vw[i], r.gps_lever_arm,
                                 gtsam.noiseModel.Isotropic.Sigma(2, kf.gps_sigma[i])))
         for i in range(*np.searchsorted(kf.rng_k, [k, k + 1])):
-            g.add(gf.range_factor(XK(k), WK(k), kf.rng_z[i], kf.rng_tau[i], kf.rng_beacon[i], r.range_lever_arm,
+            g.add(gf.range_factor(XK(k), WK(k), kf.rng_z[i], kf.rng_tau_vw[i], kf.rng_beacon[i], r.range_lever_arm,
                                   gtsam.noiseModel.Isotropic.Sigma(1, r.range_sigma)))
         g.add(gf.motion_factor(XK(k), WK(k), XK(k + 1), kf.dt[k],
                                gtsam.noiseModel.Diagonal.Sigmas(1.0 / prob.motion_whiten[k])))

@@ -24,7 +24,7 @@ import gtsam
 import numpy as np
 
 from factors import encoder, gps, gyro, pose2, pseudo, ranging, velocity
-from factors.motion import propagate, transition_residual
+from factors.motion import arc_at, propagate, transition_residual
 
 
 def _pose(values, key):
@@ -66,9 +66,11 @@ def _velocity_error(z, this, values, jacobians):
 
 
 def _arc_to(values, kx, kw, tau):
+    """tau: a time [s], or the effective (tau_v, tau_omega) of motion.arc_at."""
     x, y, th = _pose(values, kx)
     w = values.atVector(kw)
-    p, Jf = propagate(x, y, th, w[0], w[1], tau)
+    tv, tw = (tau, tau) if np.ndim(tau) == 0 else tau
+    p, Jf = arc_at(x, y, th, w[0], w[1], tv, tw)
     return p, Jf, th
 
 
@@ -147,15 +149,20 @@ def velocity_factor(kw, z, noise) -> gtsam.CustomFactor:
     return gtsam.CustomFactor(noise, [kw], partial(_velocity_error, np.asarray(z, float)))
 
 
+def _tau(tau):
+    return float(tau) if np.ndim(tau) == 0 else (float(tau[0]), float(tau[1]))
+
+
 def gps_factor(kx, kw, z, tau, lever, noise) -> gtsam.CustomFactor:
-    """Antenna fix z (2,) [m] at tau [s] after keyframe k, on X(k), W(k)."""
-    return gtsam.CustomFactor(noise, [kx, kw], partial(_gps_error, np.asarray(z, float), float(tau),
+    """Antenna fix z (2,) [m] at tau after keyframe k, on X(k), W(k); tau [s] is a
+    time or the effective (tau_v, tau_omega) of motion.arc_at."""
+    return gtsam.CustomFactor(noise, [kx, kw], partial(_gps_error, np.asarray(z, float), _tau(tau),
                                                       tuple(lever)))
 
 
 def range_factor(kx, kw, z, tau, beacon, lever, noise) -> gtsam.CustomFactor:
-    """Range z [m] to ``beacon`` (2,) at tau [s] after keyframe k, on X(k), W(k)."""
-    return gtsam.CustomFactor(noise, [kx, kw], partial(_range_error, float(z), float(tau),
+    """Range z [m] to ``beacon`` (2,) at tau after keyframe k (as gps_factor), on X(k), W(k)."""
+    return gtsam.CustomFactor(noise, [kx, kw], partial(_range_error, float(z), _tau(tau),
                                                       np.asarray(beacon, float), tuple(lever)))
 
 

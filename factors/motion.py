@@ -72,6 +72,32 @@ def propagate(x, y, theta, v, omega, dt):
     return pose, J
 
 
+def arc_at(x, y, theta, v, omega, tau_v, tau_omega):
+    """Pose partway through an interval flown with average velocities (v, omega):
+    the arc of length v tau_v that turns by omega tau_omega.
+
+    With tau_v = tau_omega = tau this is ``propagate(..., tau)``. Inside a
+    keyframe interval the robot is rarely at constant speed, so the smoother
+    passes the *effective* times: tau_v = dt x the share of the interval's
+    wheel travel done by the measurement time, tau_omega likewise for the
+    wheels' difference (keyframes.py). Both are data, not states.
+
+    Args:
+        x, y, theta: (...) pose at the start of the interval, world frame [m, rad].
+        v, omega: (...) interval-average forward speed [m/s] and yaw rate [rad/s].
+        tau_v, tau_omega: (...) effective times [s].
+
+    Returns:
+        pose: (..., 3); J: (..., 3, 5) d pose / d (x, y, theta, v, omega).
+    """
+    tau_v = np.asarray(tau_v, float)
+    tau_omega = np.asarray(tau_omega, float)
+    pose, J = propagate(x, y, theta, v * tau_v, omega * tau_omega, np.ones_like(tau_v))
+    J[..., 3] *= tau_v[..., None]
+    J[..., 4] *= tau_omega[..., None]
+    return pose, J
+
+
 def transition_residual(x, y, theta, v, omega, dt, x1, y1, theta1):
     """Residual of the next pose against the motion model, in the predicted body frame.
 

@@ -63,6 +63,21 @@ def test_motion_is_the_exact_arc():
     np.testing.assert_allclose(pose_eps, pose0, atol=1e-7)
 
 
+@pytest.mark.parametrize("s", random_states(10) + EDGE)
+@pytest.mark.parametrize("tau", [(0.05, 0.05), (0.1, 0.03), (0.0, 0.2), (0.2, 0.0)])
+def test_arc_at_jacobian_and_equal_times(s, tau):
+    args = [s[k] for k in motion.INPUTS]
+    fun = lambda x, y, th, v, w: motion.arc_at(x, y, th, v, w, *tau)
+    p, J = motion.arc_at(*args, *tau)
+    np.testing.assert_allclose(J, numeric_jacobian(fun, args, 3), atol=1e-6)
+    if tau[0] == tau[1]:
+        p2, J2 = motion.propagate(*args, tau[0])
+        np.testing.assert_allclose(p, p2, atol=1e-14)
+        np.testing.assert_allclose(J, J2, atol=1e-14)
+    # distance travelled v tau_v, turned omega tau_omega
+    assert p[2] == pytest.approx(s["theta"] + s["omega"] * tau[1], abs=1e-12)
+
+
 def test_motion_broadcasts():
     n = 50
     st = random_states(n)

@@ -94,7 +94,7 @@ def test_vectorised_linearisation_equals_the_custom_factors():
     np.testing.assert_allclose(f.whitenedError(values), -lin.b_u[0, 0:2], rtol=1e-9, atol=1e-9)
     # first GPS fix of the interval
     g = int(np.searchsorted(kf.gps_k, k))
-    f = gf.gps_factor(X(k), W(k), kf.gps_xy[g], kf.gps_tau[g], r.gps_lever_arm,
+    f = gf.gps_factor(X(k), W(k), kf.gps_xy[g], kf.gps_tau_vw[g], r.gps_lever_arm,
                       gtsam.noiseModel.Isotropic.Sigma(2, kf.gps_sigma[g]))
     row = 7 + 2 * prob.gps_slot[g]
     A = f.linearize(values).jacobian()[0]

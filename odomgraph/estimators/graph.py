@@ -12,7 +12,8 @@ Factors, all built on the models in ``factors/`` (the EKF's models):
   common-mode and differential slip (as in the EKF) and the scale factors (a
   floor of 1e-5/sqrt(s) keeps the chain free of global variables);
 * unary on (X_k, W_k): encoder (eq. 29), gyro (eq. 10), velocity sensor,
-  GPS (eq. 8) and range (eq. 12) at tau after t_k via the arc, and the
+  GPS (eq. 8) and range (eq. 12) part-way along the arc (motion.arc_at, at the
+  share of the interval's wheel travel done by their time), and the
   schedule's zero-slip prior (eq. 35);
 * a prior on keyframe 0 from the initialisation.
 
@@ -26,7 +27,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from factors import encoder, gps as gps_model, gyro, pose2, ranging
-from factors.motion import propagate, transition_residual
+from factors.motion import arc_at, transition_residual
 from odomgraph.estimators.keyframes import Keyframes
 from odomgraph.io.robot import RobotConfig
 
@@ -223,7 +224,8 @@ def linearize(prob: Problem, pose: np.ndarray, W: np.ndarray, k0: int = 0, k1: i
     g0, g1 = np.searchsorted(kf.gps_k, [k0, k1])
     if g1 > g0:
         k = kf.gps_k[g0:g1] - k0
-        p, Jf = propagate(x[k], y[k], th[k], w[k, 0], w[k, 1], kf.gps_tau[g0:g1])
+        tvw = kf.gps_tau_vw[g0:g1]
+        p, Jf = arc_at(x[k], y[k], th[k], w[k, 0], w[k, 1], tvw[:, 0], tvw[:, 1])
         h, Jh = gps_model.antenna_position(p[:, 0], p[:, 1], p[:, 2], r.gps_lever_arm)
         Jt = Jh @ Jf                                              # (G, 2, 5) world (x, y, theta, v, omega)
         inv = (1.0 / kf.gps_sigma[g0:g1])[:, None]
@@ -246,7 +248,8 @@ def linearize(prob: Problem, pose: np.ndarray, W: np.ndarray, k0: int = 0, k1: i
         range_bias = np.zeros(nb)
     if q1 > q0:
         k = kf.rng_k[q0:q1] - k0
-        p, Jf = propagate(x[k], y[k], th[k], w[k, 0], w[k, 1], kf.rng_tau[q0:q1])
+        tvw = kf.rng_tau_vw[q0:q1]
+        p, Jf = arc_at(x[k], y[k], th[k], w[k, 0], w[k, 1], tvw[:, 0], tvw[:, 1])
         bias = range_bias[kf.rng_id[q0:q1]] if nb else 0.0
         h, Jh = ranging.beacon_range(p[:, 0], p[:, 1], p[:, 2], kf.rng_beacon[q0:q1], r.range_lever_arm, bias)
         Jt = Jh[:, :, :3] @ Jf

@@ -59,6 +59,12 @@ class Keyframes:
     """(R,) measured range [m]."""
     rng_id: np.ndarray | None = None
     """(R,) index of the beacon in robot.beacons."""
+    gps_tau_vw: np.ndarray | None = None
+    """(G, 2) effective times (tau_v, tau_omega) of each fix (motion.arc_at): the
+    share of the interval's wheel travel, and of the wheels' difference, done
+    by the fix time, times dt [s]."""
+    rng_tau_vw: np.ndarray | None = None
+    """(R, 2) the same for each range."""
 
     @property
     def dt(self) -> np.ndarray:
@@ -102,6 +108,7 @@ def build_keyframes(log: Log, t_start: float, keyframe_hz: float) -> Keyframes:
         # quantisation counts once per keyframe interval (only its two ends are floored)
         quant = speed_sigma(np.zeros_like(m), 0.0, 0.0, tpm, dt_k[:, None])
         sigma = np.sqrt((cumv[idx[1:]] - cumv[idx[:-1]]) / dt_k[:, None] ** 2 + quant**2)
+        travel_t, travel = t_all, cum / tpm                                    # wheel travel [m] at each row
     else:
         w = log.wheel_speeds
         first = int(np.searchsorted(w.t, t_start, side="left"))
@@ -116,7 +123,27 @@ def build_keyframes(log: Log, t_start: float, keyframe_hz: float) -> Keyframes:
         tot = np.stack([np.bincount(k[inside], ms[inside, j], minlength=len(t) - 1) for j in range(2)], -1)
         m = tot / np.maximum(n, 1)[:, None]
         sigma = speed_sigma(m, a, b) / np.sqrt(np.maximum(n, 1))[:, None]
+        # wheel travel by the trapezoid rule between speed samples
+        travel_t = w.t
+        travel = np.concatenate([np.zeros((1, 2)), np.cumsum(0.5 * (ms[1:] + ms[:-1]) * np.diff(w.t)[:, None], 0)])
     nint = len(t) - 1
+    # Forward travel (mean of the wheels) and turning (their difference) at the keyframes.
+    fwd = travel.mean(1)
+    turn = travel[:, 1] - travel[:, 0]
+    eps = 2.0 / max(r.ticks_per_meter_left, r.ticks_per_meter_right, 1.0)   # two ticks [m]
+
+    def effective(k, ts):
+        """(len, 2) effective (tau_v, tau_omega) of times ts in intervals k."""
+        tau = ts - t[k]
+        out = np.empty((len(ts), 2))
+        for j, c in enumerate((fwd, turn)):
+            c0, c1 = np.interp(t[k], travel_t, c), np.interp(t[k + 1], travel_t, c)
+            ct = np.interp(ts, travel_t, c)
+            total = c1 - c0
+            moving = np.abs(total) > eps
+            share = np.where(moving, (ct - c0) / np.where(moving, total, 1.0), tau / (t[k + 1] - t[k]))
+            out[:, j] = np.clip(share, 0.0, 1.0) * (t[k + 1] - t[k])
+        return out
 
     def averaged(ts, vals):
         k, inside = _bin(t, ts)
@@ -134,20 +161,22 @@ def build_keyframes(log: Log, t_start: float, keyframe_hz: float) -> Keyframes:
         vel_z, vel_n = averaged(log.velocity.t, np.stack([log.velocity.v, log.velocity.omega], -1))
     empty2 = np.zeros((0, 2))
     gk = gt = gs = np.zeros(0)
-    gxy = empty2
+    gxy = gvw = empty2
     if log.gps is not None and len(log.gps.t):
         g = log.gps
         k, inside = _bin(t, g.t)
         gk, gt = k[inside], g.t[inside] - t[k[inside]]
+        gvw = effective(gk, g.t[inside])
         gxy = np.stack([g.x, g.y], -1)[inside]
         gs = (g.sigma if g.sigma is not None else np.full(len(g.t), r.gps_sigma))[inside]
     rk = rt = rz = rid = np.zeros(0)
-    rb = empty2
+    rb = rvw = empty2
     if log.ranges is not None and len(log.ranges.t):
         rg = log.ranges
         k, inside = _bin(t, rg.t)
         rk, rt, rz = k[inside], rg.t[inside] - t[k[inside]], rg.range[inside]
+        rvw = effective(rk, rg.t[inside])
         rb = np.asarray([[bc.x, bc.y] for bc in r.beacons])[rg.beacon[inside]]
         rid = rg.beacon[inside]
     return Keyframes(t, m, sigma, gyro_z, np.asarray(gyro_n), vel_z, np.asarray(vel_n),
-                     gk.astype(int), gt, gxy, gs, rk.astype(int), rt, rb, rz, np.asarray(rid, int))
+                     gk.astype(int), gt, gxy, gs, rk.astype(int), rt, rb, rz, np.asarray(rid, int), gvw, rvw)
