@@ -23,7 +23,7 @@ from factors.motion import propagate
 from odomgraph import state as S
 from odomgraph.errors import EstimatorDivergedError
 from odomgraph.estimators.ekf import (_DOF, _ENC_IDX, _GYRO_IDX, _POSE_IDX, _SCALE_IDX, _SLIP_IDX, _VEL_IDX, GPS,
-                                      GYRO, RANGE, SENSOR_NAMES, WHEEL, EKFOptions, add_process_noise, event_stream,
+                                      GYRO, RANGE, SENSOR_NAMES, WHEEL, EKFOptions, event_stream,
                                       make_estimate)
 from odomgraph.estimators.initial import initial_state
 from odomgraph.estimators.measurements import from_log, slip_intensity
@@ -32,6 +32,21 @@ from odomgraph.estimators.schedule import Hold, Schedule
 from odomgraph.io.log import Log
 
 _I = np.eye(S.N)
+
+
+def add_process_noise_many(P: np.ndarray, J: np.ndarray, dt: float, q: dict, q_slip: np.ndarray) -> None:
+    """ekf.add_process_noise for a batch: P (N, 11, 11), J (N, 3, 5), one dt."""
+    G = J[:, :, 3:5]
+    Gq = G * (q["v"], q["w"])
+    P[:, 0:3, 0:3] += (dt / 3.0) * (Gq @ np.swapaxes(G, 1, 2))
+    P[:, 0:3, 3:5] += (0.5 * dt) * Gq
+    P[:, 3:5, 0:3] += (0.5 * dt) * np.swapaxes(Gq, 1, 2)
+    P[:, 3, 3] += q["v"] * dt
+    P[:, 4, 4] += q["w"] * dt
+    P[:, 5, 5] += q["bias"] * dt
+    P[:, 6:8, 6:8] += q_slip * dt
+    if q["scale"]:
+        P[:, 8:11, 8:11] += np.eye(3) * q["scale"] * dt
 
 
 def _inv_small(A: np.ndarray) -> np.ndarray:
@@ -156,7 +171,7 @@ def run_ekf_many(logs: list[Log], schedule: Schedule = Schedule(), options: EKFO
                 # F P F' with F = I except rows 0:3 = J (on the first 5 states)
                 P[:, 0:3, :] = J @ P[:, 0:5, :]
                 P[:, :, 0:3] = P[:, :, 0:5] @ np.swapaxes(J, 1, 2)
-                add_process_noise(P, J, dt, q, q_slip)
+                add_process_noise_many(P, J, dt, q, q_slip)
                 x[:, 0], x[:, 1], x[:, 2] = pose[:, 0], pose[:, 1], wrap_angle(pose[:, 2])
                 t_now = t
             if switch_sigma is None and t_switch is not None and t >= t_switch:
