@@ -110,6 +110,9 @@ def _print_comparison(m: dict) -> None:
     for r in rows:
         typer.echo("  ".join(r[i].ljust(w) for i, w in zip(keep, widths)))
     typer.echo(f"reference: {m['reference_note']}")
+    for label, e in m["estimators"].items():
+        if "failed" in e and label != "isam2-online":
+            typer.echo(f"{label}: {e['failed']}")
 
 
 def _parse_schedule(calibrate_until: str, hold: HoldName):

@@ -239,5 +239,6 @@ def compare_to_dir(log: Log, out: Path, schedule: Schedule, progress_for=None, t
             if label != "isam2-online":  # it is isam2/online.csv
                 write_estimate(est, d / label, summary(est, log, schedule))
         write_report(cmp, d, title)
-        overview_figure([cmp.estimates["ekf"], cmp.estimates["batch"]], log, d / "figure.png", title=title)
+        shown = [e for k, e in cmp.estimates.items() if k in ("ekf", "batch")] or list(cmp.estimates.values())
+        overview_figure(shown, log, d / "figure.png", title=title)
     return cmp

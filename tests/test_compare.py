@@ -3,6 +3,7 @@ own scores, the fig. 7 finding, and logs without truth or GPS."""
 import json
 import re
 import shutil
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -134,3 +135,22 @@ def test_compare_refuses_a_schedule_the_ekf_cannot_run(short_log_dir, tmp_path):
                               "none"])
     assert res.exit_code == 1 and "needs a schedule" in res.output
     assert not (tmp_path / "x").exists()
+
+
+def test_a_diverging_estimator_is_reported_not_fatal(tmp_path):
+    """On the real libRSF cut the nominal wheel parameters are off by about 2x.
+    The incremental smoothers' linear factors, linearised at predictions made
+    with them, stop explaining the ranges; their divergence watch says so, and
+    the report carries on with the others."""
+    from odomgraph.io.importers.librsf import import_librsf
+    from odomgraph.pipeline import compare_to_dir
+    log = import_librsf(Path(__file__).parent / "data" / "librsf" / "Indoor_UWB_Input.txt")
+    cmp = compare_to_dir(log, tmp_path / "rep", Schedule(0.0))
+    est = cmp.metrics["estimators"]
+    assert "diverged at t=" in est["isam2"]["failed"] and "ranges residuals" in est["isam2"]["failed"]
+    assert est["isam2-online"] == est["isam2"]
+    assert est["batch"]["rms_position_m"] < 0.25 and est["ekf"]["rms_position_m"] < 0.4
+    names = sorted(p.name for p in (tmp_path / "rep").iterdir())
+    assert "isam2" not in names and "batch" in names and "fig7_gps_deviation.png" not in names  # no GPS
+    page = (tmp_path / "rep" / "report.html").read_text()
+    assert "<b>isam2 diverged</b>" in page

@@ -184,3 +184,15 @@ def test_keyframe_fixes_use_the_wheel_travel_inside_the_interval():
     assert np.all((tvw >= 0) & (tvw <= kf.dt[kf.gps_k][:, None] + 1e-12))
     accel = np.abs(tvw[:, 0] - tau) > 0.01          # fixes inside intervals where the speed changes
     assert 0.02 < accel.mean() < 0.5
+
+
+def test_fixed_lag_says_when_it_diverges_on_far_off_nominal_parameters():
+    """The libRSF cut's wheel speeds are about 2x the true speeds. Fixed-lag's
+    linear factors cannot follow; the divergence watch stops it with a reason
+    instead of returning a path tens of metres off."""
+    from pathlib import Path
+    from odomgraph.errors import EstimatorDivergedError
+    from odomgraph.io.importers.librsf import import_librsf
+    log = import_librsf(Path(__file__).parent / "data" / "librsf" / "Indoor_UWB_Input.txt")
+    with pytest.raises(EstimatorDivergedError, match=r"fixed-lag diverged at t=\d+\.\d+ s: .*ranges residuals"):
+        run_fixed_lag(log, Schedule(0.0))

@@ -13,7 +13,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from odomgraph.analysis.metrics import gps_deviation, range_residuals, truth_errors
-from odomgraph.errors import OdomgraphError
+from odomgraph.errors import EstimatorDivergedError, OdomgraphError
 from odomgraph.estimators.result import Estimate
 from odomgraph.estimators.schedule import Schedule
 from odomgraph.io.log import Log
@@ -28,9 +28,10 @@ class Comparison:
     log: Log
     schedule: Schedule
     estimates: dict[str, Estimate]
-    """Label (ESTIMATORS) -> estimate."""
-    no_slip: Estimate
-    """The EKF without slip states: the paper's fig. 7 baseline."""
+    """Label (ESTIMATORS) -> estimate, for those that did not diverge
+    (metrics["estimators"][label]["failed"] says why for the others)."""
+    no_slip: Estimate | None
+    """The EKF without slip states: the paper's fig. 7 baseline (None if it diverged)."""
     metrics: dict
     """metrics.json content (see ``comparison_metrics``)."""
 
@@ -48,18 +49,39 @@ def run_comparison(log: Log, schedule: Schedule, progress_for=None, **options) -
                              "(0 = slip only), not 'none'")
     prog = progress_for or (lambda label: None)
     ests: dict[str, Estimate] = {}
-    ests["ekf"] = estimate(log, Method.ekf, schedule, prog("ekf"), **options)
-    isam = estimate(log, Method.isam2, schedule, prog("isam2"), **options)
-    online = replace(isam.online, method="isam2-online", t_switch=isam.t_switch, wall_time_s=isam.wall_time_s,
-                     n_updates=isam.n_updates)
-    ests["isam2-online"], ests["isam2"] = online, isam
-    ests["batch"] = estimate(log, Method.batch, schedule, prog("batch"), **options)
+    failed: dict[str, str] = {}
+
+    def attempt(label, run):
+        # A diverged estimator is a result of the comparison, not the end of it.
+        try:
+            return run()
+        except EstimatorDivergedError as exc:
+            failed[label] = str(exc)
+            return None
+
+    for label, method in (("ekf", Method.ekf), ("isam2", Method.isam2), ("batch", Method.batch)):
+        est = attempt(label, lambda: estimate(log, method, schedule, prog(label), **options))
+        if est is None:
+            if label == "isam2":
+                failed["isam2-online"] = failed["isam2"]
+            continue
+        if label == "isam2":
+            ests["isam2-online"] = replace(est.online, method="isam2-online", t_switch=est.t_switch,
+                                           wall_time_s=est.wall_time_s, n_updates=est.n_updates)
+        ests[label] = est
+    if not ests:
+        raise EstimatorDivergedError("every estimator diverged on this log: " + "; ".join(failed.values()))
     gate = options.get("gate")
     # Without slip states the filter is expected to disagree with its encoders
     # during slip (that is what fig. 7 shows), so its NIS watch is off.
-    no_slip = run_ekf(log, schedule, EKFOptions(gate=gate, slip_states=False, max_mean_nis=np.inf),
-                      prog("ekf without slip"))
-    return Comparison(log, schedule, ests, no_slip, comparison_metrics(ests, log, schedule, no_slip))
+    no_slip = attempt("ekf-no-slip", lambda: run_ekf(
+        log, schedule, EKFOptions(gate=gate, slip_states=False, max_mean_nis=np.inf), prog("ekf without slip")))
+    metrics = comparison_metrics(ests, log, schedule, no_slip)
+    for label, msg in failed.items():
+        metrics["estimators"][label] = {"failed": msg}
+    order = [*ESTIMATORS, "ekf-no-slip"]
+    metrics["estimators"] = {k: metrics["estimators"][k] for k in order if k in metrics["estimators"]}
+    return Comparison(log, schedule, ests, no_slip, metrics)
 
 
 def _rms(x: np.ndarray) -> float | None:

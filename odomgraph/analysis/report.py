@@ -31,7 +31,8 @@ def write_figures(cmp: Comparison, directory: Path, title: str = "") -> list[Pat
         plots.trajectory_figure(ests, cmp.log, d / FIGURES[0][0], title),
         plots.slip_figure(ests, cmp.log, d / FIGURES[1][0], title),
         plots.scale_figure(ests, cmp.log, d / FIGURES[2][0], title),
-        plots.gps_deviation_figure([cmp.estimates["ekf"], cmp.no_slip, *ests[1:]], cmp.log,
+        plots.gps_deviation_figure([e for e in (cmp.estimates.get("ekf"), cmp.no_slip) if e is not None]
+                                   + [e for k, e in cmp.estimates.items() if k != "ekf"], cmp.log,
                                    d / FIGURES[3][0], title),
         plots.consistency_figure(ests, cmp.log, d / FIGURES[4][0], title),
     ]
@@ -52,6 +53,9 @@ def metrics_table_rows(metrics: dict) -> list[list[str]]:
             "wall time [s]", "updates/s"]
     rows = [head]
     for label, m in metrics["estimators"].items():
+        if "failed" in m:
+            rows.append([label, "diverged"] + [""] * (len(head) - 2))
+            continue
         pos = {"truth": m["rms_position_m"], "gps": m["rms_gps_deviation_m"],
                "ranges": m["rms_range_residual_m"], "none": None}[ref]
         scales = []
@@ -100,7 +104,11 @@ def report_html(cmp: Comparison, directory: Path, figures: list[Path], title: st
     parts.append("<h2>Metrics</h2><table><tr>" + "".join(f"<th>{esc(c)}</th>" for c in rows[0]) + "</tr>")
     for r in rows[1:]:
         parts.append("<tr>" + "".join(f"<td>{esc(c)}</td>" for c in r) + "</tr>")
-    parts.append("</table><p>isam2-online is the causal estimate (each row as it stood at its time, "
+    parts.append("</table>")
+    for label, e in m["estimators"].items():
+        if "failed" in e:
+            parts.append(f"<p class='note'><b>{esc(label)} diverged</b>: {esc(e['failed'])}</p>")
+    parts.append("<p>isam2-online is the causal estimate (each row as it stood at its time, "
                  "comparable with the EKF); isam2 and batch are smoothed. ekf-no-slip is the same EKF without "
                  "slip states. Slip is scored after the calibration window.</p>")
     captions = dict(FIGURES)

@@ -30,9 +30,10 @@ from gtsam.symbol_shorthand import S as S_KEY
 from gtsam.symbol_shorthand import W as W_KEY
 from gtsam.symbol_shorthand import X as X_KEY
 
-from factors import pose2
+from factors import gps as gps_model
+from factors import pose2, ranging
 from factors._math import wrap_angle
-from factors.motion import propagate
+from factors.motion import arc_at, propagate
 from odomgraph import state as St
 from odomgraph.errors import EstimatorDivergedError
 from odomgraph.estimators.batch import (SmootherOptions, _factor_arrays, _n_measurements, build_problem,
@@ -70,6 +71,10 @@ class IncrementalOptions(SmootherOptions):
     """Age [s] at which an interval's linear factors are linearised again, at
     the by then nearly final estimate (they were first linearised at a
     prediction). 0 disables."""
+    max_mean_residual: float = 50.0
+    """Diverged when the running mean (about the last 50) of the whitened squared
+    post-fit residuals of GPS fixes or ranges exceeds this many times their
+    dimension: the estimate no longer explains the data (as EKFOptions.max_mean_nis)."""
 
 
 def _params(options: IncrementalOptions, reuse_slots: bool = False) -> gtsam.ISAM2Params:
@@ -214,6 +219,7 @@ class _Runner:
             self.update_times[k] = time.perf_counter() - t0
             if not (np.all(np.isfinite(self.pose[k])) and np.all(np.isfinite(self.W[k]))):
                 raise EstimatorDivergedError(f"{self.method} diverged at t={kf.t[k]:.3f} s: non-finite estimate")
+            self._watch(k - 1)
             if progress is not None and k % stride == 0:
                 progress(k, n)
         est = self.finish()
@@ -223,6 +229,44 @@ class _Runner:
         est.t_switch = None if self.schedule.calibrate_until is None else t0 + self.schedule.calibrate_until
         est.update_times = self.update_times[1:]
         return est
+
+
+    def _watch(self, j: int) -> None:
+        """Divergence watch on interval j's GPS fixes and ranges, at the estimate just
+        updated with them. A linear factor keeps the linearisation it was given;
+        if that was far off (nominal parameters wrong by 2x, say), the estimate
+        can walk away from the data while every update looks normal. Post-fit
+        residuals of a healthy smoother are at the noise level."""
+        kf, r = self.prob.kf, self.prob.robot
+        if not hasattr(self, "_ema"):
+            self._ema = {"GPS fixes": [2.0, 0, 2], "ranges": [1.0, 0, 1]}   # mean, count, dof
+        x, y, th = self.pose[j]
+        v, w = self.W[j, 0], self.W[j, 1]
+        checks = []
+        g0, g1 = np.searchsorted(kf.gps_k, [j, j + 1])
+        if g1 > g0:
+            tvw = kf.gps_tau_vw[g0:g1]
+            p, _ = arc_at(x, y, th, v, w, tvw[:, 0], tvw[:, 1])
+            h, _ = gps_model.antenna_position(p[:, 0], p[:, 1], p[:, 2], r.gps_lever_arm)
+            checks.append(("GPS fixes", np.sum(((h - kf.gps_xy[g0:g1]) / kf.gps_sigma[g0:g1, None]) ** 2, 1)))
+        q0, q1 = np.searchsorted(kf.rng_k, [j, j + 1])
+        if q1 > q0:
+            tvw = kf.rng_tau_vw[q0:q1]
+            p, _ = arc_at(x, y, th, v, w, tvw[:, 0], tvw[:, 1])
+            h, _ = ranging.beacon_range(p[:, 0], p[:, 1], p[:, 2], kf.rng_beacon[q0:q1], r.range_lever_arm)
+            checks.append(("ranges", ((h[:, 0] - kf.rng_z[q0:q1]) / r.range_sigma) ** 2))
+        limit = self.options.max_mean_residual
+        for name, values in checks:
+            e = self._ema[name]
+            for u in np.minimum(values, 10.0 * limit * e[2]):    # one gross outlier cannot trip it
+                e[0] = 0.98 * e[0] + 0.02 * u
+                e[1] += 1
+            if e[1] > 100 and e[0] > limit * e[2]:
+                raise EstimatorDivergedError(
+                    f"{self.method} diverged at t={kf.t[j + 1]:.3f} s: the running mean of whitened squared "
+                    f"{name} residuals is {e[0]:.0f} (expected about {e[2]}); its linear factors were linearised "
+                    "too far from the answer (e.g. nominal parameters far off). The batch smoother "
+                    "(--method batch) relinearises everything and may still work")
 
 
 #: ISAM2 boundary tangent order (X 3, W_KEY 6, S_KEY 2) -> keyframe block order (graph.py).
