@@ -18,6 +18,7 @@ import numpy as np
 from benchmarks._common import save
 from odomgraph.analysis.deadreckoning import best_fit_scales, dead_reckon, final_position_error
 from odomgraph.analysis.metrics import truth_errors
+from odomgraph.errors import EstimatorDivergedError
 from odomgraph.estimators.schedule import Schedule
 from odomgraph.io.importers.librsf import import_librsf
 from odomgraph.io.importers.optiodom import import_optiodom
@@ -88,6 +89,14 @@ def main():
         md.append(f"| {label} | {e.rms_position_m:.3f} |")
         if est.range_bias is not None and "Huber" not in label:
             biases = est.range_bias
+    for m in (Method.isam2, Method.fixed_lag):
+        try:
+            e = truth_errors(estimate(rsf, m, Schedule(0.0)), rsf)
+            out[f"librsf_{m.value}"] = e.rms_position_m
+            md.append(f"| {m.value} | {e.rms_position_m:.3f} |")
+        except EstimatorDivergedError as exc:
+            out[f"librsf_{m.value}"] = str(exc)
+            md.append(f"| {m.value} | diverged: {str(exc).split(':')[0]} ({str(exc).split(': ')[1].split(';')[0]}) |")
     t, p = dead_reckon(rsf, start=(est.t[0], *est.mean[0, 0:3]))
     dr = float(np.sqrt(np.mean((p[:, 0] - rsf.truth.at("x", t)) ** 2 + (p[:, 1] - rsf.truth.at("y", t)) ** 2)))
     out["librsf_dead_reckoning"] = dr
