@@ -368,8 +368,14 @@ def montecarlo(
     if runs < 1 or grid < 2 or duration < 30:
         raise OdomgraphError("need --runs >= 1, --grid >= 2 and --duration >= 30 s (20 s of calibration, then slip)")
     spec = StudySpec.grid(config, grid, runs=runs, duration=duration, seed=seed, smoother=smoother)
-    with _Progress(f"config {config}: {grid}x{grid} points x {runs} runs") as bar:
-        results = run_study(spec, output, workers=workers, scheduler=scheduler, progress=bar)
+    try:
+        with _Progress(f"config {config}: {grid}x{grid} points x {runs} runs") as bar:
+            results = run_study(spec, output, workers=workers, scheduler=scheduler, progress=bar)
+    except KeyboardInterrupt:
+        done = len(list((output / "points").glob("*.json"))) if (output / "points").is_dir() else 0
+        typer.echo(f"odomgraph: interrupted; {done} finished grid point(s) are kept in {output}/points; "
+                   "run the same command again to resume", err=True)
+        raise typer.Exit(code=130)
     files = write_outputs(spec, results, output)
     for f in findings(spec, results):
         verdict = {True: "reproduces", False: "does NOT reproduce", None: "grid cannot tell"}[f["holds"]]
