@@ -181,8 +181,8 @@ def simulate(
     """Simulate a scenario and write a log directory with truth.csv and truth.toml."""
     from odomgraph.errors import OdomgraphError
     from odomgraph.io.log import write_log
-    from odomgraph.sim.scenarios import SCENARIOS, SlipEvent, beacons_around
-    from odomgraph.sim.simulate import simulate as run_sim
+    from odomgraph.sim.scenarios import SCENARIOS, SlipEvent
+    from odomgraph.sim.simulate import beacons_around_path, simulate as run_sim
 
     sc = SCENARIOS[scenario.value]() if duration is None else SCENARIOS[scenario.value](duration)
     if duration is not None and duration <= 0:
@@ -211,9 +211,7 @@ def simulate(
     if encoder_sigma is not None:
         robot = robot.with_(encoder_sigma=floats(encoder_sigma, 2, "--encoder-sigma"))
     if sc.rates.ranges > 0 and not robot.beacons:
-        box = run_sim(sc.with_(rates=sc.rates.__class__(encoders=sc.rates.encoders, gyro=0, gps=0)), seed).truth
-        robot = robot.with_(beacons=beacons_around(box.values["x"].min(), box.values["x"].max(),
-                                                   box.values["y"].min(), box.values["y"].max()))
+        robot = robot.with_(beacons=beacons_around_path(sc))
     sc = sc.with_(robot=robot, write_initial=initial)
     if scales is not None:
         sc = sc.with_(scales=floats(scales, 3, "--scales"))

@@ -56,18 +56,22 @@ def final_position_error(log: Log, scales=(1.0, 1.0, 1.0)) -> float:
                           p[k, 1] - log.truth.at("y", np.array([t[k]]))[0]))
 
 
-def best_fit_scales(logs: list[Log], start=(1.0, 1.0, 1.0), iterations: int = 20) -> np.ndarray:
+def best_fit_scales(logs: list[Log], start=(1.0, 1.0, 1.0), iterations: int = 20,
+                    whole_path: bool = False) -> np.ndarray:
     """The three scale factors minimising the squared final-position errors of
     dead reckoning over ``logs`` (Gauss-Newton, numerical Jacobian): the
-    oracle a calibration is compared with."""
+    oracle a calibration is compared with. ``whole_path`` fits every tenth
+    position of the path instead of the final one."""
     s = np.asarray(start, float)
+    rows = slice(None, None, 10) if whole_path else slice(-1, None)
 
     def residual(sc):
         out = []
         for lg in logs:
             t, p = dead_reckon(lg, sc)
-            out += [p[-1, 0] - lg.truth.at("x", t[-1:])[0], p[-1, 1] - lg.truth.at("y", t[-1:])[0]]
-        return np.array(out)
+            t, p = t[rows], p[rows]
+            out += [p[:, 0] - lg.truth.at("x", t), p[:, 1] - lg.truth.at("y", t)]
+        return np.concatenate(out)
 
     for _ in range(iterations):
         r0 = residual(s)

@@ -99,15 +99,12 @@ class PointResult:
         return sum(v is None for v in s) / len(s)
 
 
-def _score(est, log, t_switch: float) -> list[float]:
-    from odomgraph import state as S
-    post = est.t >= t_switch
-    out = []
-    for i, true in zip(S.SCALE, log.truth_scales):
-        out.append(float(np.sqrt(np.mean((est.mean[post, i] - true) ** 2))))
-    for name in ("slip_left", "slip_right"):
-        e = est.mean[post, S.IDX[name]] - log.truth.at(name, est.t[post])
-        out.append(float(np.sqrt(np.mean(e**2))))
+def _score(est, log) -> list[float]:
+    """QUANTITIES of one run: RMS over the rows after the schedule's switch (metrics.truth_errors)."""
+    from odomgraph.analysis.metrics import truth_errors
+    err = truth_errors(est, log)
+    post = err.slip_mask
+    out = [float(np.sqrt(np.mean(err.error_series[q][post] ** 2))) for q in QUANTITIES]
     if not np.all(np.isfinite(out)):
         raise EstimatorDivergedError("non-finite score")
     return out
@@ -131,14 +128,13 @@ def run_point(p: PointSpec) -> PointResult:
     schedule = Schedule(calibrate_until=st.calibrate_until)
     ekf = run_ekf_many(logs, schedule)
     w2 = time.perf_counter()
-    t_switch = logs[0].t_start + st.calibrate_until
     scores = {"ekf": [], "batch": []}
     failures = {"ekf": [], "batch": []}
     for log, est in zip(logs, ekf):
         try:
             if isinstance(est, Exception):
                 raise est
-            scores["ekf"].append(_score(est, log, t_switch))
+            scores["ekf"].append(_score(est, log))
         except (EstimatorDivergedError, FloatingPointError, np.linalg.LinAlgError) as exc:
             scores["ekf"].append(None)
             failures["ekf"].append(str(exc))
@@ -148,7 +144,7 @@ def run_point(p: PointSpec) -> PointResult:
             if isinstance(est, Exception):
                 raise EstimatorDivergedError(f"no EKF estimate to start from ({est})")
             smoothed = run_batch(log, schedule, SmootherOptions(), initial=est)
-            scores["batch"].append(_score(smoothed, log, t_switch))
+            scores["batch"].append(_score(smoothed, log))
         except (EstimatorDivergedError, FloatingPointError, np.linalg.LinAlgError, RuntimeError) as exc:
             scores["batch"].append(None)
             failures["batch"].append(str(exc))

@@ -1,7 +1,6 @@
 """Figures, findings and the HTML summary of a Monte-Carlo study (paper figs. 8-10)."""
 from __future__ import annotations
 
-import base64
 import html
 from pathlib import Path
 
@@ -131,6 +130,7 @@ def findings(spec: StudySpec, results: list[PointResult], estimator: str = "ekf"
 
 def summary_html(spec: StudySpec, results: list[PointResult], directory, figures: list[Path]) -> str:
     from odomgraph.analysis.montecarlo import results_table
+    from odomgraph.analysis.report import embed_png
     from odomgraph.sim.sensor_configs import CONFIGS
     cfg = CONFIGS[spec.config]
     esc = html.escape
@@ -152,8 +152,7 @@ def summary_html(spec: StudySpec, results: list[PointResult], directory, figures
             parts.append(f"<li><b>{esc(f['claim'])}</b>: {esc(f['measured'])}. <i>{verdict}</i></li>")
         parts.append("</ul>")
     for p in figures:
-        data = base64.b64encode(Path(p).read_bytes()).decode("ascii")
-        parts.append(f"<img alt='{esc(Path(p).name)}' src='data:image/png;base64,{data}'>")
+        parts.append(embed_png(p, Path(p).name))
     cols = list(rows[0])
     parts.append("<h2>Results</h2><table><tr>" + "".join(f"<th>{esc(c)}</th>" for c in cols) + "</tr>")
     for r in rows:

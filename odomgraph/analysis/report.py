@@ -39,6 +39,12 @@ def write_figures(cmp: Comparison, directory: Path, title: str = "") -> list[Pat
     return [p for p in out if p is not None]
 
 
+def embed_png(path: Path | str, alt: str) -> str:
+    """An <img> with the PNG inlined as a data URI, so the page needs no other file."""
+    data = base64.b64encode(Path(path).read_bytes()).decode("ascii")
+    return f"<img alt='{html.escape(alt)}' src='data:image/png;base64,{data}'>"
+
+
 def _fmt(v, spec: str = ".3f", empty: str = "–") -> str:
     return empty if v is None else format(v, spec)
 
@@ -114,8 +120,7 @@ def report_html(cmp: Comparison, directory: Path, figures: list[Path], title: st
     captions = dict(FIGURES)
     parts.append("<h2>Figures</h2>")
     for p in figures:
-        data = base64.b64encode((Path(directory) / p.name).read_bytes()).decode("ascii")
-        parts.append(f"<figure><img alt='{esc(p.name)}' src='data:image/png;base64,{data}'>"
+        parts.append(f"<figure>{embed_png(Path(directory) / p.name, p.name)}"
                      f"<figcaption>{esc(p.name)}: {esc(captions.get(p.name, ''))}</figcaption></figure>")
     notes = sorted({n for e in cmp.estimates.values() for n in e.notes})
     if notes:

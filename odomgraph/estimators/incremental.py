@@ -183,6 +183,7 @@ class _Runner:
             raise OdomgraphError(f"{self.method}: range biases and a robust velocity random walk are "
                                  "batch-smoother options")
         self.log, self.schedule, self.options = log, schedule, options
+        self._ema = {"GPS fixes": [2.0, 0, 2], "ranges": [1.0, 0, 1]}   # _watch: running mean, count, dof
         self.prob = build_problem(log, schedule, options)
         self.graph = _Graph(self.prob, options)
         n = self.prob.kf.n
@@ -238,8 +239,6 @@ class _Runner:
         can walk away from the data while every update looks normal. Post-fit
         residuals of a healthy smoother are at the noise level."""
         kf, r = self.prob.kf, self.prob.robot
-        if not hasattr(self, "_ema"):
-            self._ema = {"GPS fixes": [2.0, 0, 2], "ranges": [1.0, 0, 1]}   # mean, count, dof
         x, y, th = self.pose[j]
         v, w = self.W[j, 0], self.W[j, 1]
         checks = []
@@ -483,7 +482,6 @@ class ISAM2Runner(_Runner):
             delta = _block_local(seg["vals"], *fin)
             inf_f = np.linalg.inv(cov_f)
             fin, cov_f = self._smooth_segment(i, inf_f - np.linalg.inv(seg["cov"]), inf_f @ delta)
-        self.segments = [{"k0": s["k0"], "b": s["b"]} for s in self.segments]
         Sig = marginal_blocks(self.prob, self.pose, self.W)
         est = keyframe_rows(self.prob, self.pose, self.W, Sig, "isam2")
         est.calibration_sigma = np.sqrt(np.diagonal(Sig[-1])[8:11])

@@ -25,7 +25,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from odomgraph.sim.scenarios import Rates, Scenario, SlipEvent, beacons_around, paper
+from odomgraph.sim.scenarios import Rates, Scenario, SlipEvent, paper
 
 
 @dataclass(frozen=True)
@@ -81,13 +81,6 @@ def study_scenario(config: int, x_sigma: float, y_sigma: float, duration: float 
         values["velocity_sigma"] = (values["velocity_sigma"],) * 2
     robot = robot.with_(**values)
     if cfg.rates.ranges > 0:
-        robot = robot.with_(beacons=_beacons(duration))
+        from odomgraph.sim.simulate import beacons_around_path
+        robot = robot.with_(beacons=beacons_around_path(base))
     return base.with_(robot=robot, slips=slips, rates=cfg.rates, write_initial=True)
-
-
-def _beacons(duration: float):
-    """Three beacons around the track of the run (its motion does not depend on noise)."""
-    from odomgraph.sim.simulate import simulate
-    sc = paper(duration).with_(rates=Rates(encoders=5.0, gyro=0.0, gps=0.0, truth=5.0))
-    v = simulate(sc, 0).truth.values
-    return beacons_around(v["x"].min(), v["x"].max(), v["y"].min(), v["y"].max())

@@ -163,3 +163,11 @@ def simulate(sc: Scenario, seed: int = 0, timing_seed: int | None = None) -> Log
     if sc.write_initial:
         robot = robot.with_(initial=InitialPose(x0, y0, th0, (0.05, 0.05, 0.02)))
     return Log(robot=robot, truth=truth, truth_scales=tuple(sc.scales), **log_parts)
+
+
+def beacons_around_path(sc: Scenario, n: int = 3):
+    """n beacons around the true path of ``sc`` (scenarios.beacons_around on its
+    bounding box; the motion does not depend on noise or seed)."""
+    from odomgraph.sim.scenarios import Rates, beacons_around
+    v = simulate(sc.with_(rates=Rates(encoders=5.0, gyro=0.0, gps=0.0, truth=sc.rates.truth)), 0).truth.values
+    return beacons_around(v["x"].min(), v["x"].max(), v["y"].min(), v["y"].max(), n)
