@@ -85,12 +85,10 @@ def straightforward_graph(prob, k0: int = 0, k1: int | None = None):
     for k in range(k0, k1):
         g.add(gf.encoder_factor(WK(k), SK(k), kf.enc_m[k], gtsam.noiseModel.Diagonal.Sigmas(kf.enc_sigma[k]),
                                 r.track_width))
-        if kf.gyro_n[k]:
-            sg = np.sqrt(r.gyro_sigma**2 / kf.gyro_n[k] + pn.yaw_accel**2 * kf.dt[k] / (6 * kf.gyro_n[k]))
-            g.add(gf.gyro_factor(WK(k), kf.gyro_z[k], gtsam.noiseModel.Isotropic.Sigma(1, sg)))
-        if kf.vel_n[k]:
-            g.add(gf.velocity_factor(WK(k), kf.vel_z[k], gtsam.noiseModel.Diagonal.Sigmas(
-                np.asarray(r.velocity_sigma) / np.sqrt(kf.vel_n[k]))))
+        if np.isfinite(kf.gyro_sigma[k]):
+            g.add(gf.gyro_factor(WK(k), kf.gyro_z[k], gtsam.noiseModel.Isotropic.Sigma(1, kf.gyro_sigma[k])))
+        if np.all(np.isfinite(kf.vel_sigma[k])):
+            g.add(gf.velocity_factor(WK(k), kf.vel_z[k], gtsam.noiseModel.Diagonal.Sigmas(kf.vel_sigma[k])))
         for i in range(*np.searchsorted(kf.gps_k, [k, k + 1])):
             g.add(gf.gps_factor(XK(k), WK(k), kf.gps_xy[i], kf.gps_tau_vw[i], r.gps_lever_arm,
                                 gtsam.noiseModel.Isotropic.Sigma(2, kf.gps_sigma[i])))

@@ -183,22 +183,15 @@ def linearize(prob: Problem, pose: np.ndarray, W: np.ndarray, k0: int = 0, k1: i
     inv = 1.0 / kf.enc_sigma[k0:k1]
     b_u[:, 0:2] = -(h - kf.enc_m[k0:k1]) * inv
     A_u[:, 0:2][:, :, _ENC_COLS] = J * inv[:, :, None]
-    # --- gyro average (eq. 10-11): sample noise / n plus the spread of omega inside the interval.
-    gn = kf.gyro_n[k0:k1]
-    has = gn > 0
-    if has.any():
-        sg = np.sqrt(r.gyro_sigma**2 / np.maximum(gn, 1) + pn.yaw_accel**2 * dt / (6 * np.maximum(gn, 1)))
+    # --- gyro average (eq. 10-11), and the velocity sensor's (sec. VI-B); keyframes.interval_means.
+    s = 1.0 / kf.gyro_sigma[k0:k1]
+    if np.any(s > 0):
         h, J = gyro.yaw_rate(w[:, 1], w[:, 2])
-        s = np.where(has, 1.0 / sg, 0.0)
         b_u[:, 2] = -(h[:, 0] - kf.gyro_z[k0:k1]) * s
         A_u[:, 2, OM] = J[:, 0, 0] * s
         A_u[:, 2, B] = J[:, 0, 1] * s
-    # --- velocity sensor average (sec. VI-B).
-    vn = kf.vel_n[k0:k1]
-    has = vn > 0
-    if has.any():
-        sv = np.asarray(r.velocity_sigma)[None, :] / np.sqrt(np.maximum(vn, 1))[:, None]
-        s = np.where(has[:, None], 1.0 / sv, 0.0)
+    s = 1.0 / kf.vel_sigma[k0:k1]
+    if np.any(s > 0):
         b_u[:, 3:5] = -(w[:, 0:2] - kf.vel_z[k0:k1]) * s
         A_u[:, 3, V] = s[:, 0]
         A_u[:, 4, OM] = s[:, 1]

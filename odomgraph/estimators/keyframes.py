@@ -12,8 +12,8 @@ interval gives the average wheel speed, which the encoder model (paper
 eq. 29) predicts from W_k with no approximation, because the model is linear
 in v, omega and slip for constant scale factors. Tick quantisation counts only
 once per interval. The pose moves by the exact arc of the average velocity
-(factors.motion). Gyro and velocity-sensor samples inside an interval are
-averaged; GPS fixes and ranges keep their own time, at offset tau after t_k.
+(factors.motion). Gyro and velocity-sensor readings are averaged over each
+interval by integrating their linear interpolant (interval_means); GPS fixes and ranges keep their own time, at offset tau after t_k.
 """
 from __future__ import annotations
 
@@ -36,13 +36,17 @@ class Keyframes:
     enc_sigma: np.ndarray
     """(N-1, 2) its 1-sigma: eq. 41 averaged over the samples, plus quantisation [m/s]."""
     gyro_z: np.ndarray
-    """(N-1,) average gyro reading over each interval [rad/s] (NaN-free; see gyro_n)."""
+    """(N-1,) average gyro reading over each interval [rad/s] (interval_means)."""
+    gyro_sigma: np.ndarray
+    """(N-1,) its 1-sigma [rad/s]; inf where the interval has no gyro data."""
     gyro_n: np.ndarray
-    """(N-1,) gyro samples per interval (0: none)."""
+    """(N-1,) gyro samples inside each interval."""
     vel_z: np.ndarray
     """(N-1, 2) average velocity-sensor reading [m/s, rad/s]."""
+    vel_sigma: np.ndarray
+    """(N-1, 2) its 1-sigma; inf where none."""
     vel_n: np.ndarray
-    """(N-1,) velocity samples per interval."""
+    """(N-1,) velocity samples inside each interval."""
     gps_k: np.ndarray
     """(G,) interval of each GPS fix."""
     gps_tau: np.ndarray
@@ -80,6 +84,92 @@ def _bin(t_kf: np.ndarray, t: np.ndarray):
     k = np.searchsorted(t_kf, t, side="right") - 1
     inside = (k >= 0) & (k < len(t_kf) - 1)
     return k, inside
+
+
+def interval_means(t_kf: np.ndarray, ts: np.ndarray, z: np.ndarray, sigma, q):
+    """Average over each keyframe interval of a sampled rate signal, with its 1-sigma.
+
+    The signal (a gyro's yaw rate, a velocity sensor's v and omega) is
+    interpolated linearly between samples and held beyond the first and last,
+    and the interpolant is integrated exactly over [t_k, t_{k+1}]. A plain mean
+    of the samples inside the interval would be a Riemann sum whose sample
+    times wander against the interval (25 Hz gyro, 5 Hz keyframes); while the
+    rate ramps that error is correlated over the whole ramp and it biased the
+    track width (benchmarks/track_bias.py).
+
+    The variance has two parts: the sample noise through the integration
+    weights, sum_i (w_i sigma)^2 / dt^2, and the interpolation error when the
+    signal is a random walk of intensity q, pinned at the samples (a Brownian
+    bridge between samples, a free walk beyond the ends): for a stretch
+    [u0, u0 + L] of a gap [0, h] it is q^2 (u0 L^2 + L^3/3 - ((u0+L)^2 - u0^2)^2 / (4 h)).
+    Samples next to an interval boundary feed both neighbours; that small
+    correlation is ignored.
+
+    Args:
+        t_kf: (N,) keyframe times [s].
+        ts: (M,) sample times [s], increasing.
+        z: (M,) or (M, C) samples.
+        sigma, q: scalar or (C,) sample 1-sigma and random-walk intensity per channel.
+
+    Returns:
+        mean: (N-1, C); sd: (N-1, C), inf where the interval has no sample
+        inside and is not between two samples; n: (N-1,) samples inside.
+    """
+    t_kf = np.asarray(t_kf, float)
+    ts = np.asarray(ts, float)
+    z = np.asarray(z, float).reshape(len(ts), -1)
+    sigma = np.broadcast_to(np.asarray(sigma, float), (z.shape[1],))
+    q = np.broadcast_to(np.asarray(q, float), (z.shape[1],))
+    M, nint = len(ts), len(t_kf) - 1
+    a, b = t_kf[:-1], t_kf[1:]
+    T0 = min(t_kf[0], ts[0]) - 1.0
+    ja = np.searchsorted(ts, a, side="right") - 1               # last sample <= a (-1: none)
+    jb = np.searchsorted(ts, b, side="right") - 1
+    lo = np.clip(ja, 0, M - 1)
+    hi = np.clip(jb + 1, 0, M - 1)
+    width = int((hi - lo).max()) + 1
+    cols = lo[:, None] + np.arange(width)[None, :]
+    valid = cols <= hi[:, None]
+    i = np.minimum(cols, M - 1)
+
+    def hat_integral(t):
+        """(nint, width) integral from T0 to t of sample i's hat basis function."""
+        t = t[:, None]
+        tl = np.where(i > 0, ts[np.maximum(i - 1, 0)], T0)
+        ti = ts[i]
+        hl = ti - tl
+        s = np.clip(t - tl, 0.0, hl)
+        left = np.where(i > 0, s**2 / (2 * np.where(hl > 0, hl, 1.0)), s)   # first sample: held
+        has_r = i < M - 1
+        hr = np.where(has_r, ts[np.minimum(i + 1, M - 1)] - ti, 1.0)
+        s = np.clip(t - ti, 0.0, np.where(has_r, hr, np.inf))
+        right = np.where(has_r, s - s**2 / (2 * hr), s)                     # last sample: held
+        return left + right
+
+    w = np.where(valid, hat_integral(b) - hat_integral(a), 0.0)             # (nint, width) [s]
+    dt = b - a
+    mean = np.einsum("kw,kwc->kc", w, z[i]) / dt[:, None]
+    noise_var = np.sum(w**2, 1)[:, None] * sigma**2
+    model = np.zeros(nint)                                                  # [s^3] per unit q^2
+    for off in range(width + 1):
+        j = ja + off                                                        # gap [ts[j], ts[j+1]]
+        segl = np.where(j >= 0, ts[np.clip(j, 0, M - 1)], -np.inf)
+        segr = np.where(j + 1 <= M - 1, ts[np.clip(j + 1, 0, M - 1)], np.inf)
+        u0, u1 = np.maximum(a, segl), np.minimum(b, segr)
+        L = np.clip(u1 - u0, 0.0, None)
+        bridge = np.isfinite(segl) & np.isfinite(segr)
+        left_pinned = np.isfinite(segl)
+        d0 = np.where(left_pinned, u0 - np.where(left_pinned, segl, 0.0), np.where(left_pinned, 0.0, segr) - u1)
+        h = np.where(bridge, segr - segl, 1.0)
+        base = np.where(left_pinned, segl, 0.0)
+        pin = np.where(bridge, ((u1 - base) ** 2 - (u0 - base) ** 2) ** 2 / (4 * h), 0.0)
+        model += np.where((j <= jb) & (L > 0), d0 * L**2 + L**3 / 3 - pin, 0.0)
+    sd = np.sqrt(noise_var + model[:, None] * q**2) / dt[:, None]
+    k, inside = _bin(t_kf, ts)
+    n = np.bincount(k[inside], minlength=nint)
+    between = (ja >= 0) & (jb + 1 <= M - 1)
+    sd[~((n > 0) | between)] = np.inf
+    return mean, sd, n
 
 
 def build_keyframes(log: Log, t_start: float, keyframe_hz: float) -> Keyframes:
@@ -145,20 +235,16 @@ def build_keyframes(log: Log, t_start: float, keyframe_hz: float) -> Keyframes:
             out[:, j] = np.clip(share, 0.0, 1.0) * (t[k + 1] - t[k])
         return out
 
-    def averaged(ts, vals):
-        k, inside = _bin(t, ts)
-        n = np.bincount(k[inside], minlength=nint)
-        vals = np.atleast_2d(vals.T).T
-        tot = np.stack([np.bincount(k[inside], vals[inside, j], minlength=nint) for j in range(vals.shape[1])], -1)
-        return tot / np.maximum(n, 1)[:, None], n
-
-    gyro_z, gyro_n = np.zeros(nint), np.zeros(nint, int)
+    pn = r.process
+    gyro_z, gyro_sd, gyro_n = np.zeros(nint), np.full(nint, np.inf), np.zeros(nint, int)
     if log.gyro is not None and len(log.gyro.t):
-        z, gyro_n = averaged(log.gyro.t, log.gyro.omega)
-        gyro_z = z[:, 0]
-    vel_z, vel_n = np.zeros((nint, 2)), np.zeros(nint, int)
+        z, sd, gyro_n = interval_means(t, log.gyro.t, log.gyro.omega, r.gyro_sigma,
+                                       np.hypot(pn.yaw_accel, pn.gyro_bias))
+        gyro_z, gyro_sd = z[:, 0], sd[:, 0]
+    vel_z, vel_sd, vel_n = np.zeros((nint, 2)), np.full((nint, 2), np.inf), np.zeros(nint, int)
     if log.velocity is not None and len(log.velocity.t):
-        vel_z, vel_n = averaged(log.velocity.t, np.stack([log.velocity.v, log.velocity.omega], -1))
+        vel_z, vel_sd, vel_n = interval_means(t, log.velocity.t, np.stack([log.velocity.v, log.velocity.omega], -1),
+                                              r.velocity_sigma, (pn.accel, pn.yaw_accel))
     empty2 = np.zeros((0, 2))
     gk = gt = gs = np.zeros(0)
     gxy = gvw = empty2
@@ -178,5 +264,7 @@ def build_keyframes(log: Log, t_start: float, keyframe_hz: float) -> Keyframes:
         rvw = effective(rk, rg.t[inside])
         rb = np.asarray([[bc.x, bc.y] for bc in r.beacons])[rg.beacon[inside]]
         rid = rg.beacon[inside]
-    return Keyframes(t, m, sigma, gyro_z, np.asarray(gyro_n), vel_z, np.asarray(vel_n),
-                     gk.astype(int), gt, gxy, gs, rk.astype(int), rt, rb, rz, np.asarray(rid, int), gvw, rvw)
+    return Keyframes(t=t, enc_m=m, enc_sigma=sigma, gyro_z=gyro_z, gyro_sigma=gyro_sd, gyro_n=np.asarray(gyro_n),
+                     vel_z=vel_z, vel_sigma=vel_sd, vel_n=np.asarray(vel_n), gps_k=gk.astype(int), gps_tau=gt,
+                     gps_xy=gxy, gps_sigma=gs, rng_k=rk.astype(int), rng_tau=rt, rng_beacon=rb, rng_z=rz,
+                     rng_id=np.asarray(rid, int), gps_tau_vw=gvw, rng_tau_vw=rvw)
