@@ -1,4 +1,4 @@
-"""Issue 3's open criterion: where the batch smoother's track-width error comes from.
+"""Issue 3: where the batch smoother's scale-factor errors come from.
 
 Paper scenario; each variant changes one thing (sensor noise, keyframe rate,
 a prior, a tolerance) and reports the mean and spread over seeds of the
@@ -29,6 +29,7 @@ VARIANTS = {
     "quiet + encoder noise": (True, ("encoder_sigma",), {}, {}, 1.0),
     "quiet + GPS noise": (True, ("gps_sigma",), {}, {}, 1.0),
     "quiet + gyro noise": (True, ("gyro_sigma",), {}, {}, 1.0),
+    "quiet + every sensor's noise": (True, ("encoder_sigma", "gps_sigma", "gyro_sigma"), {}, {}, 1.0),
     "quiet, 10 Hz keyframes": (True, (), {}, {"keyframe_hz": 10.0}, 1.0),
     "quiet, 20 Hz keyframes": (True, (), {}, {"keyframe_hz": 20.0}, 1.0),
     "quiet, 100× finer ticks": (True, (), {"ticks_per_meter_left": 2e5, "ticks_per_meter_right": 2e5}, {}, 1.0),

@@ -57,3 +57,20 @@ def test_no_data_gives_an_infinite_sigma():
     _, sd, n = interval_means(tk, ts, np.ones(3), 0.01, 0.3)
     assert np.isinf(sd[[0, 4], 0]).all()                          # before the first / after the last sample
     assert np.isfinite(sd[1:4, 0]).all() and n.tolist() == [0, 1, 1, 1, 0]
+
+
+def test_causal_means_read_no_sample_after_the_interval(irregular):
+    rng, ts, tk = irregular
+    z = rng.normal(size=len(ts))
+    m, sd, n = interval_means(tk, ts, z, 0.01, 0.3, causal=True)
+    for k in range(len(tk) - 1):
+        later = ts > tk[k + 1]
+        z2 = z.copy()
+        z2[later] = 1e3                                          # the future changes...
+        m2, sd2, _ = interval_means(tk, ts, z2, 0.01, 0.3, causal=True)
+        assert m2[k, 0] == m[k, 0] or not np.isfinite(sd[k, 0])  # ...interval k does not
+        assert sd2[k, 0] == sd[k, 0]
+    # held tails cost variance: causal sigma is never below the two-sided one
+    _, sd_two, _ = interval_means(tk, ts, z, 0.01, 0.3)
+    ok = np.isfinite(sd[:, 0])
+    assert np.all(sd[ok, 0] >= sd_two[ok, 0] - 1e-15) and ok.sum() == (n > 0).sum()

@@ -58,11 +58,12 @@ class SmootherOptions:
     For robots whose speed jumps (in-place pivots started and stopped at once)."""
 
 
-def build_problem(log: Log, schedule: Schedule, options: SmootherOptions) -> Problem:
-    """The keyframe graph of a log: same initialisation and schedule as the EKF."""
+def build_problem(log: Log, schedule: Schedule, options: SmootherOptions, causal: bool = False) -> Problem:
+    """The keyframe graph of a log: same initialisation and schedule as the EKF.
+    ``causal``: no interval's factors read data after its end (incremental smoothers)."""
     meas = from_log(log)
     init = initial_state(log.robot, meas)
-    kf = build_keyframes(log, init.t, options.keyframe_hz)
+    kf = build_keyframes(log, init.t, options.keyframe_hz, causal)
     if kf.n < 3:
         raise EstimatorDivergedError("the log is too short for the smoother: fewer than 3 keyframes")
     # Move the initial state to the first keyframe (a fraction of an encoder period).

@@ -184,7 +184,8 @@ class _Runner:
                                  "batch-smoother options")
         self.log, self.schedule, self.options = log, schedule, options
         self._ema = {"GPS fixes": [2.0, 0, 2], "ranges": [1.0, 0, 1]}   # _watch: running mean, count, dof
-        self.prob = build_problem(log, schedule, options)
+        # causal: the online row of interval k is produced at t_{k+1} from data up to t_{k+1}
+        self.prob = build_problem(log, schedule, options, causal=True)
         self.graph = _Graph(self.prob, options)
         n = self.prob.kf.n
         self.pose = np.zeros((n, 3))

@@ -86,7 +86,7 @@ def _bin(t_kf: np.ndarray, t: np.ndarray):
     return k, inside
 
 
-def interval_means(t_kf: np.ndarray, ts: np.ndarray, z: np.ndarray, sigma, q):
+def interval_means(t_kf: np.ndarray, ts: np.ndarray, z: np.ndarray, sigma, q, causal: bool = False):
     """Average over each keyframe interval of a sampled rate signal, with its 1-sigma.
 
     The signal (a gyro's yaw rate, a velocity sensor's v and omega) is
@@ -105,11 +105,17 @@ def interval_means(t_kf: np.ndarray, ts: np.ndarray, z: np.ndarray, sigma, q):
     Samples next to an interval boundary feed both neighbours; that small
     correlation is ignored.
 
+    ``causal``: interval k reads no sample after t_{k+1}; its tail after the
+    last sample inside is held, with the free-walk variance. The incremental
+    smoothers use this so that their online estimate at t_{k+1} needs no
+    later data.
+
     Args:
         t_kf: (N,) keyframe times [s].
         ts: (M,) sample times [s], increasing.
         z: (M,) or (M, C) samples.
         sigma, q: scalar or (C,) sample 1-sigma and random-walk intensity per channel.
+        causal: see above.
 
     Returns:
         mean: (N-1, C); sd: (N-1, C), inf where the interval has no sample
@@ -125,8 +131,9 @@ def interval_means(t_kf: np.ndarray, ts: np.ndarray, z: np.ndarray, sigma, q):
     T0 = min(t_kf[0], ts[0]) - 1.0
     ja = np.searchsorted(ts, a, side="right") - 1               # last sample <= a (-1: none)
     jb = np.searchsorted(ts, b, side="right") - 1
+    last = jb if causal else np.full(nint, M - 1)                  # last sample each interval may read
     lo = np.clip(ja, 0, M - 1)
-    hi = np.clip(jb + 1, 0, M - 1)
+    hi = np.clip(np.minimum(jb + 1, last), 0, M - 1)
     width = int((hi - lo).max()) + 1
     cols = lo[:, None] + np.arange(width)[None, :]
     valid = cols <= hi[:, None]
@@ -140,7 +147,7 @@ def interval_means(t_kf: np.ndarray, ts: np.ndarray, z: np.ndarray, sigma, q):
         hl = ti - tl
         s = np.clip(t - tl, 0.0, hl)
         left = np.where(i > 0, s**2 / (2 * np.where(hl > 0, hl, 1.0)), s)   # first sample: held
-        has_r = i < M - 1
+        has_r = i < last[:, None]
         hr = np.where(has_r, ts[np.minimum(i + 1, M - 1)] - ti, 1.0)
         s = np.clip(t - ti, 0.0, np.where(has_r, hr, np.inf))
         right = np.where(has_r, s - s**2 / (2 * hr), s)                     # last sample: held
@@ -154,7 +161,7 @@ def interval_means(t_kf: np.ndarray, ts: np.ndarray, z: np.ndarray, sigma, q):
     for off in range(width + 1):
         j = ja + off                                                        # gap [ts[j], ts[j+1]]
         segl = np.where(j >= 0, ts[np.clip(j, 0, M - 1)], -np.inf)
-        segr = np.where(j + 1 <= M - 1, ts[np.clip(j + 1, 0, M - 1)], np.inf)
+        segr = np.where(j + 1 <= last, ts[np.clip(j + 1, 0, M - 1)], np.inf)
         u0, u1 = np.maximum(a, segl), np.minimum(b, segr)
         L = np.clip(u1 - u0, 0.0, None)
         bridge = np.isfinite(segl) & np.isfinite(segr)
@@ -167,13 +174,16 @@ def interval_means(t_kf: np.ndarray, ts: np.ndarray, z: np.ndarray, sigma, q):
     sd = np.sqrt(noise_var + model[:, None] * q**2) / dt[:, None]
     k, inside = _bin(t_kf, ts)
     n = np.bincount(k[inside], minlength=nint)
-    between = (ja >= 0) & (jb + 1 <= M - 1)
+    between = (ja >= 0) & (jb + 1 <= last)
     sd[~((n > 0) | between)] = np.inf
     return mean, sd, n
 
 
-def build_keyframes(log: Log, t_start: float, keyframe_hz: float) -> Keyframes:
-    """Keyframes from ``t_start`` on, at about ``keyframe_hz`` (at most the encoder rate)."""
+def build_keyframes(log: Log, t_start: float, keyframe_hz: float, causal: bool = False) -> Keyframes:
+    """Keyframes from ``t_start`` on, at about ``keyframe_hz`` (at most the encoder rate).
+
+    ``causal``: no interval reads data after its end (interval_means); for
+    the incremental smoothers."""
     r = log.robot
     a, b = r.encoder_sigma
     if log.encoders is not None:
@@ -239,12 +249,12 @@ def build_keyframes(log: Log, t_start: float, keyframe_hz: float) -> Keyframes:
     gyro_z, gyro_sd, gyro_n = np.zeros(nint), np.full(nint, np.inf), np.zeros(nint, int)
     if log.gyro is not None and len(log.gyro.t):
         z, sd, gyro_n = interval_means(t, log.gyro.t, log.gyro.omega, r.gyro_sigma,
-                                       np.hypot(pn.yaw_accel, pn.gyro_bias))
+                                       np.hypot(pn.yaw_accel, pn.gyro_bias), causal)
         gyro_z, gyro_sd = z[:, 0], sd[:, 0]
     vel_z, vel_sd, vel_n = np.zeros((nint, 2)), np.full((nint, 2), np.inf), np.zeros(nint, int)
     if log.velocity is not None and len(log.velocity.t):
         vel_z, vel_sd, vel_n = interval_means(t, log.velocity.t, np.stack([log.velocity.v, log.velocity.omega], -1),
-                                              r.velocity_sigma, (pn.accel, pn.yaw_accel))
+                                              r.velocity_sigma, (pn.accel, pn.yaw_accel), causal)
     empty2 = np.zeros((0, 2))
     gk = gt = gs = np.zeros(0)
     gxy = gvw = empty2
