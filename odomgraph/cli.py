@@ -113,6 +113,8 @@ def _print_comparison(m: dict) -> None:
     for label, e in m["estimators"].items():
         if "failed" in e and label != "isam2-online":
             typer.echo(f"{label}: {e['failed']}")
+        for b, v in (e.get("range_bias") or {}).items():
+            typer.echo(f"{label}: range bias {b:<8} {v['value']:+.3f} ± {v['sigma']:.3f} m")
 
 
 def _parse_schedule(calibrate_until: str, hold: HoldName):
@@ -322,6 +324,9 @@ def compare(
     = None,
     robust: Annotated[Optional[RobustName], typer.Option(help="Smoothers: robust loss for GPS and ranges.")]
     = None,
+    range_bias: Annotated[bool, typer.Option(
+        "--range-bias", help="batch: also estimate a constant range bias per beacon (the others cannot).")]
+    = False,
 ):
     """Run the EKF, iSAM2 (online and smoothed) and the batch smoother on one log and write a
     self-contained report.html, the paper's figures (1-3, 7, NEES/NIS), metrics.json and the estimates.
@@ -332,7 +337,7 @@ def compare(
     log = read_log(log_dir)
     with _MultiProgress() as bars:
         cmp = compare_to_dir(log, output, schedule, bars, gate=gate, keyframe_hz=keyframe_hz,
-                             robust=robust.value if robust else None)
+                             robust=robust.value if robust else None, range_bias=range_bias or None)
     _print_comparison(cmp.metrics)
     typer.echo(f"wrote {output}/report.html")
 

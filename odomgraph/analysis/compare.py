@@ -40,7 +40,8 @@ def run_comparison(log: Log, schedule: Schedule, progress_for=None, **options) -
     """Run every estimator of ESTIMATORS (and the no-slip EKF) on ``log``.
 
     ``progress_for(label)`` may return a progress(done, total) callback for
-    each run. ``options`` are passed to every estimator (see pipeline.estimate).
+    each run. ``options`` are passed to every estimator (see pipeline.estimate),
+    except ``range_bias``, which only the batch smoother estimates.
     """
     from odomgraph.estimators.ekf import EKFOptions, run_ekf
     from odomgraph.pipeline import Method, estimate
@@ -60,7 +61,8 @@ def run_comparison(log: Log, schedule: Schedule, progress_for=None, **options) -
             return None
 
     for label, method in (("ekf", Method.ekf), ("isam2", Method.isam2), ("batch", Method.batch)):
-        est = attempt(label, lambda: estimate(log, method, schedule, prog(label), **options))
+        opts = options if method is Method.batch else {k: v for k, v in options.items() if k != "range_bias"}
+        est = attempt(label, lambda: estimate(log, method, schedule, prog(label), **opts))
         if est is None:
             if label == "isam2":
                 failed["isam2-online"] = failed["isam2"]
@@ -102,6 +104,7 @@ def estimator_metrics(est: Estimate, log: Log) -> dict:
         "coverage_3sigma": {},
         "coverage_3sigma_min": None,
         "mean_nees_pose": None,
+        "range_bias": est.range_bias,
     }
     cal = est.calibration
     err = truth_errors(est, log)

@@ -127,7 +127,8 @@ def gps_deviation(est: Estimate, log: Log) -> tuple[np.ndarray, np.ndarray] | No
 
 def range_residuals(est: Estimate, log: Log) -> tuple[np.ndarray, np.ndarray] | None:
     """Measured minus predicted range (paper eq. 12) at each range time inside the
-    estimate's span: (t (M,) [s], residual (M,) [m]); None without ranges."""
+    estimate's span: (t (M,) [s], residual (M,) [m]); None without ranges.
+    An estimator that estimated per-beacon range biases is judged with them."""
     from factors.ranging import beacon_range
     r = log.ranges
     if r is None or len(r.t) == 0 or not log.robot.beacons:
@@ -136,7 +137,11 @@ def range_residuals(est: Estimate, log: Log) -> tuple[np.ndarray, np.ndarray] | 
     t = r.t[inside]
     p = pose_at(est, t)
     bxy = np.asarray([[b.x, b.y] for b in log.robot.beacons])[r.beacon[inside]]
-    h, _ = beacon_range(p[:, 0], p[:, 1], p[:, 2], bxy, log.robot.range_lever_arm)
+    bias = 0.0
+    if est.range_bias:
+        per_beacon = np.array([est.range_bias.get(b.id, {"value": 0.0})["value"] for b in log.robot.beacons])
+        bias = per_beacon[r.beacon[inside]]
+    h, _ = beacon_range(p[:, 0], p[:, 1], p[:, 2], bxy, log.robot.range_lever_arm, bias)
     return t, r.range[inside] - h[:, 0]
 
 
