@@ -74,3 +74,17 @@ def test_causal_means_read_no_sample_after_the_interval(irregular):
     _, sd_two, _ = interval_means(tk, ts, z, 0.01, 0.3)
     ok = np.isfinite(sd[:, 0])
     assert np.all(sd[ok, 0] >= sd_two[ok, 0] - 1e-15) and ok.sum() == (n > 0).sum()
+
+
+def test_a_long_gap_between_keyframes_gives_the_same_answer_without_padding_every_row():
+    rng = np.random.default_rng(5)
+    ts = np.arange(0.0, 200.0, 0.04)                               # 25 Hz gyro
+    z = np.sin(0.3 * ts) + rng.normal(0, 0.01, ts.size)
+    tk = np.concatenate([np.arange(0.0, 100.0, 0.2), np.arange(160.0, 199.9, 0.2)])   # 60 s encoder gap
+    m, sd, n = interval_means(tk, ts, z, 0.01, 0.3)
+    wide = np.flatnonzero(np.diff(tk) > 1.0)
+    assert wide.size == 1 and n[wide[0]] > 1400
+    # each row alone equals the same row computed with the others
+    for k in (0, 250, wide[0], wide[0] + 1, len(tk) - 2):
+        m1, sd1, _ = interval_means(tk[k:k + 2], ts, z, 0.01, 0.3)
+        assert m1[0, 0] == pytest.approx(m[k, 0], abs=1e-12) and sd1[0, 0] == pytest.approx(sd[k, 0], rel=1e-12)

@@ -13,7 +13,8 @@ eq. 29) predicts from W_k with no approximation, because the model is linear
 in v, omega and slip for constant scale factors. Tick quantisation counts only
 once per interval. The pose moves by the exact arc of the average velocity
 (factors.motion). Gyro and velocity-sensor readings are averaged over each
-interval by integrating their linear interpolant (interval_means); GPS fixes and ranges keep their own time, at offset tau after t_k.
+interval by integrating their linear interpolant (interval_means); GPS fixes
+and ranges keep their own time, at offset tau after t_k.
 """
 from __future__ import annotations
 
@@ -128,10 +129,37 @@ def interval_means(t_kf: np.ndarray, ts: np.ndarray, z: np.ndarray, sigma, q, ca
     q = np.broadcast_to(np.asarray(q, float), (z.shape[1],))
     M, nint = len(ts), len(t_kf) - 1
     a, b = t_kf[:-1], t_kf[1:]
-    T0 = min(t_kf[0], ts[0]) - 1.0
     ja = np.searchsorted(ts, a, side="right") - 1               # last sample <= a (-1: none)
     jb = np.searchsorted(ts, b, side="right") - 1
     last = jb if causal else np.full(nint, M - 1)                  # last sample each interval may read
+    span = np.clip(np.minimum(jb + 1, last), 0, M - 1) - np.clip(ja, 0, M - 1) + 1
+    mean = np.empty((nint, z.shape[1]))
+    var = np.empty((nint, z.shape[1]))
+    # Rows are padded to the widest interval of their group: the few intervals
+    # that span a sensor-rate gap in the keyframes go one at a time, so that a
+    # single long gap cannot blow up the (intervals x samples) arrays.
+    wide = span > max(8, 2 * int(np.median(span)))
+    for rows in (np.flatnonzero(~wide), *np.flatnonzero(wide)[:, None]):
+        if rows.size == 0:
+            continue
+        w, i = _hat_weights(ts, a[rows], b[rows], ja[rows], jb[rows], last[rows])
+        dt = b[rows] - a[rows]
+        mean[rows] = np.einsum("kw,kwc->kc", w, z[i]) / dt[:, None]
+        model = _bridge_variance(ts, a[rows], b[rows], ja[rows], jb[rows], last[rows])
+        var[rows] = (np.sum(w**2, 1)[:, None] * sigma**2 + model[:, None] * q**2) / dt[:, None] ** 2
+    sd = np.sqrt(var)
+    k, inside = _bin(t_kf, ts)
+    n = np.bincount(k[inside], minlength=nint)
+    between = (ja >= 0) & (jb + 1 <= last)
+    sd[~((n > 0) | between)] = np.inf
+    return mean, sd, n
+
+
+def _hat_weights(ts, a, b, ja, jb, last):
+    """Integration weights [s] of the samples over each [a, b] (interval_means):
+    (w (K, width), sample index i (K, width)), zero-padded."""
+    M = len(ts)
+    T0 = min(a.min(), ts[0]) - 1.0
     lo = np.clip(ja, 0, M - 1)
     hi = np.clip(np.minimum(jb + 1, last), 0, M - 1)
     width = int((hi - lo).max()) + 1
@@ -140,7 +168,7 @@ def interval_means(t_kf: np.ndarray, ts: np.ndarray, z: np.ndarray, sigma, q, ca
     i = np.minimum(cols, M - 1)
 
     def hat_integral(t):
-        """(nint, width) integral from T0 to t of sample i's hat basis function."""
+        """(K, width) integral from T0 to t of sample i's hat basis function."""
         t = t[:, None]
         tl = np.where(i > 0, ts[np.maximum(i - 1, 0)], T0)
         ti = ts[i]
@@ -153,30 +181,29 @@ def interval_means(t_kf: np.ndarray, ts: np.ndarray, z: np.ndarray, sigma, q, ca
         right = np.where(has_r, s - s**2 / (2 * hr), s)                     # last sample: held
         return left + right
 
-    w = np.where(valid, hat_integral(b) - hat_integral(a), 0.0)             # (nint, width) [s]
-    dt = b - a
-    mean = np.einsum("kw,kwc->kc", w, z[i]) / dt[:, None]
-    noise_var = np.sum(w**2, 1)[:, None] * sigma**2
-    model = np.zeros(nint)                                                  # [s^3] per unit q^2
-    for off in range(width + 1):
-        j = ja + off                                                        # gap [ts[j], ts[j+1]]
-        segl = np.where(j >= 0, ts[np.clip(j, 0, M - 1)], -np.inf)
-        segr = np.where(j + 1 <= last, ts[np.clip(j + 1, 0, M - 1)], np.inf)
-        u0, u1 = np.maximum(a, segl), np.minimum(b, segr)
-        L = np.clip(u1 - u0, 0.0, None)
-        bridge = np.isfinite(segl) & np.isfinite(segr)
-        left_pinned = np.isfinite(segl)
-        d0 = np.where(left_pinned, u0 - np.where(left_pinned, segl, 0.0), np.where(left_pinned, 0.0, segr) - u1)
-        h = np.where(bridge, segr - segl, 1.0)
-        base = np.where(left_pinned, segl, 0.0)
-        pin = np.where(bridge, ((u1 - base) ** 2 - (u0 - base) ** 2) ** 2 / (4 * h), 0.0)
-        model += np.where((j <= jb) & (L > 0), d0 * L**2 + L**3 / 3 - pin, 0.0)
-    sd = np.sqrt(noise_var + model[:, None] * q**2) / dt[:, None]
-    k, inside = _bin(t_kf, ts)
-    n = np.bincount(k[inside], minlength=nint)
-    between = (ja >= 0) & (jb + 1 <= last)
-    sd[~((n > 0) | between)] = np.inf
-    return mean, sd, n
+    return np.where(valid, hat_integral(b) - hat_integral(a), 0.0), i
+
+
+def _bridge_variance(ts, a, b, ja, jb, last):
+    """(K,) variance [s^3] per unit q^2 of the integral over [a, b] of a random
+    walk's interpolation error, pinned at the samples (interval_means)."""
+    M = len(ts)
+    j = ja[:, None] + np.arange(int((jb - ja).max()) + 2)[None, :]          # (K, W) gap [ts[j], ts[j+1]]
+    last = last[:, None]
+    a, b = a[:, None], b[:, None]
+    segl = np.where(j >= 0, ts[np.clip(j, 0, M - 1)], -np.inf)
+    segr = np.where(j + 1 <= last, ts[np.clip(j + 1, 0, M - 1)], np.inf)
+    u0, u1 = np.maximum(a, segl), np.minimum(b, segr)
+    L = np.clip(u1 - u0, 0.0, None)
+    bridge = np.isfinite(segl) & np.isfinite(segr)
+    left_pinned = np.isfinite(segl)
+    # distance of the stretch from the pinned end (the left sample, or the right one before the first sample)
+    d0 = np.where(left_pinned, u0 - np.where(left_pinned, segl, 0.0), np.where(left_pinned, 0.0, segr) - u1)
+    h = np.where(bridge, segr - segl, 1.0)
+    base = np.where(left_pinned, segl, 0.0)
+    pin = np.where(bridge, ((u1 - base) ** 2 - (u0 - base) ** 2) ** 2 / (4 * h), 0.0)
+    model = np.where((j <= jb[:, None]) & (L > 0), d0 * L**2 + L**3 / 3 - pin, 0.0).sum(1)
+    return model
 
 
 def build_keyframes(log: Log, t_start: float, keyframe_hz: float, causal: bool = False) -> Keyframes:
