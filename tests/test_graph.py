@@ -21,6 +21,7 @@ def problem():
     sc = sc.with_(robot=sc.robot.with_(beacons=beacons_around(0, 15, -5, 5)))
     log = simulate(sc, 1)
     prob = B.build_problem(log, Schedule(10.0), B.SmootherOptions(keyframe_hz=5, slip_cauchy=None))
+    prob.speed_ref = np.array([0.97, 1.02, 1.05])      # wheel-speed units in the window (graph.linearize)
     rng = np.random.default_rng(0)
     from odomgraph.estimators.ekf import run_ekf
     pose, W = B.initial_guess(prob, run_ekf(log, Schedule(10.0)))
@@ -47,7 +48,10 @@ def test_linearization_matches_numerical_derivatives(problem, k):
         if k > 0 and j < 3:
             np.testing.assert_allclose(lin.A_m1[k - 1][:, j], num["m"][k - 1], rtol=1e-5, atol=1e-4)
         if j >= 3:
-            np.testing.assert_allclose(-lin.A_w[k][:, j - 3], num["w"][k], rtol=1e-6, atol=1e-6)
+            # random-walk rows: interval k (W_k) and interval k-1 (W_k as its later end)
+            np.testing.assert_allclose(lin.A_w0[k][:, j - 3], num["w"][k], rtol=1e-6, atol=1e-6)
+            if k > 0:
+                np.testing.assert_allclose(lin.A_w1[k - 1][:, j - 3], num["w"][k - 1], rtol=1e-6, atol=1e-6)
         if k == 0:
             np.testing.assert_allclose(lin.A_p[:, j], num["p"], rtol=1e-5, atol=1e-5)
 

@@ -115,8 +115,8 @@ def _factor_arrays(prob: Problem, lin: Linearization):
     A1[:, :ru] = lin.A_u
     A1[:, ru:ru + 3] = lin.A_m0
     A2[:, ru:ru + 3, 0:3] = lin.A_m1
-    A1[:, ru + 3:, 3:] = -lin.A_w
-    A2[:, ru + 3:, 3:] = lin.A_w
+    A1[:, ru + 3:, 3:] = lin.A_w0
+    A2[:, ru + 3:, 3:] = lin.A_w1
     b[:, :ru] = lin.b_u
     b[:, ru:ru + 3] = lin.b_m
     b[:, ru + 3:] = lin.b_w
@@ -297,6 +297,7 @@ def run_batch(log: Log, schedule: Schedule = Schedule(), options: SmootherOption
     ekf_schedule = schedule if schedule.calibrate_until is not None else Schedule(20.0)
     ekf = initial if initial is not None else run_ekf(log, ekf_schedule)
     pose, W = initial_guess(prob, ekf)
+    prob.speed_ref = W[0, 5:8].copy()       # wheel-speed units of the window's walks (graph.linearize)
     pose, W, iters, cost, rb = solve(prob, pose, W, options, progress)
     if not (np.all(np.isfinite(pose)) and np.all(np.isfinite(W))):
         raise EstimatorDivergedError("batch smoother diverged: non-finite estimate")

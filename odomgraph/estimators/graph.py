@@ -10,7 +10,9 @@ Factors, all built on the models in ``factors/`` (the EKF's models):
   velocity (factors.motion.transition_residual);
 * random walk (W_k, W_{k+1}): of v, omega (white acceleration), gyro bias,
   common-mode and differential slip (as in the EKF) and the scale factors (a
-  floor of 1e-5/sqrt(s) keeps the chain free of global variables);
+  floor of 1e-5/sqrt(s) keeps the chain free of global variables). With a
+  calibration window the batch smoother takes the v, omega and slip steps in
+  wheel-speed units (Problem.wheel_speed_units);
 * unary on (X_k, W_k): encoder (eq. 29), gyro (eq. 10), velocity sensor,
   GPS (eq. 8) and range (eq. 12) part-way along the arc (motion.arc_at, at the
   share of the interval's wheel travel done by their time), and the
@@ -62,6 +64,18 @@ class Problem:
     global variable (a vector, one entry per robot.beacons); None: no bias."""
     velocity_loss: str | None = None
     """Robust loss ("huber" or "cauchy") of the v and omega random-walk steps; None: Gaussian."""
+    speed_ref: np.ndarray | None = None
+    """(3,) scale factors that define wheel-speed units for the random walks
+    (see linearize; batch: the initial guess). None: plain walks."""
+
+    @property
+    def wheel_speed_units(self) -> bool:
+        """Random walks in wheel-speed units: only with a speed_ref and a
+        calibration window. The window pins slip to zero and so anchors the
+        scale factors; without one a scale factor can shrink towards zero to
+        escape the priors (a slip-only schedule on the real libRSF log took
+        the track scale to 0)."""
+        return self.speed_ref is not None and bool(self.zero_slip.any())
 
     @property
     def n_bias(self) -> int:
@@ -141,8 +155,10 @@ class Linearization:
     A_m1: np.ndarray
     """(N-1, 3, 3) motion rows on the pose of block k+1."""
     b_m: np.ndarray
-    A_w: np.ndarray
-    """(N-1, 8, 8) random-walk whitener: rows are A_w (dW_{k+1} - dW_k) = b_w."""
+    A_w0: np.ndarray
+    """(N-1, 8, 8) random-walk rows on W_k: A_w0 dW_k + A_w1 dW_{k+1} = b_w."""
+    A_w1: np.ndarray
+    """(N-1, 8, 8) the same rows on W_{k+1}."""
     b_w: np.ndarray
     A_p: np.ndarray
     """(11, 11) prior rows on block 0."""
@@ -280,10 +296,42 @@ def linearize(prob: Problem, pose: np.ndarray, W: np.ndarray, k0: int = 0, k1: i
     A_m0[:, :, OM] = J0[:, :, 4] * sm
     A_m1 = pose2.to_body(J1, nxt[:, 2]) * sm[:, :, None]
 
-    # --- random walk of W (linear).
-    dW = W[k0 + 1:k1 + 1] - W[k0:k1]
+    # --- random walk of W, in wheel-speed units when the scale factors are anchored.
+    w0, w1 = W[k0:k1], W[k0 + 1:k1 + 1]
     A_w = prob._rw_whiten[k0:k1]
-    b_w = -np.einsum("kij,kj->ki", A_w, dW)
+    b_w = -np.einsum("kij,kj->ki", A_w, w1 - w0)
+    A_w0, A_w1 = -A_w, A_w.copy()
+    if prob.wheel_speed_units:
+        # Steps of (mean ticks/m scale) v, scale_track omega and scale x slip,
+        # relative to speed_ref, instead of v, omega and slip. A Gaussian walk
+        # on v itself is cheapest when every speed is small, and the encoder
+        # model lets the scale factors pay for that (k (v + slip) = measured):
+        # the MAP estimate shrinks the speeds, inflating ticks/m and deflating
+        # track by about (walk cost of the manoeuvres) / (GPS information on
+        # the path's size), 2 % at 0.34 m GPS (benchmarks/README.md). In
+        # wheel-speed units that trade earns nothing.
+        ref = np.asarray(prob.speed_ref, float)
+        sc0, sc1 = w0[:, 5:8] / ref, w1[:, 5:8] / ref
+        A_w0, A_w1 = A_w0.copy(), A_w1.copy()
+        for row, cols, f0, f1 in ((0, [5, 6], 0.5 * (sc0[:, 0] + sc0[:, 1]), 0.5 * (sc1[:, 0] + sc1[:, 1])),
+                                  (1, [7], sc0[:, 2], sc1[:, 2])):
+            a = A_w[:, row, row]                                  # v, omega: diagonal whitener rows
+            b_w[:, row] = -a * (f1 * w1[:, row] - f0 * w0[:, row])
+            A_w0[:, row, :] = 0.0
+            A_w1[:, row, :] = 0.0
+            A_w0[:, row, row] = -a * f0
+            A_w1[:, row, row] = a * f1
+            for c in cols:
+                A_w0[:, row, c] = -a * w0[:, row] / (len(cols) * ref[c - 5])
+                A_w1[:, row, c] = a * w1[:, row] / (len(cols) * ref[c - 5])
+        L = A_w[:, 3:5, 3:5]                                      # slips: a 2x2 block
+        b_w[:, 3:5] = -np.einsum("kij,kj->ki", L, sc1[:, 0:2] * w1[:, 3:5] - sc0[:, 0:2] * w0[:, 3:5])
+        A_w0[:, 3:5, :] = 0.0
+        A_w1[:, 3:5, :] = 0.0
+        A_w0[:, 3:5, 3:5] = -L * sc0[:, None, 0:2]
+        A_w0[:, 3:5, 5:7] = -L * (w0[:, 3:5] / ref[0:2])[:, None, :]
+        A_w1[:, 3:5, 3:5] = L * sc1[:, None, 0:2]
+        A_w1[:, 3:5, 5:7] = L * (w1[:, 3:5] / ref[0:2])[:, None, :]
     if prob.velocity_loss is not None:
         # Robust velocity steps: a robot whose commanded speed jumps (pivots
         # starting and stopping within one encoder period) breaks the Gaussian
@@ -292,8 +340,8 @@ def linearize(prob: Problem, pose: np.ndarray, W: np.ndarray, k0: int = 0, k1: i
         # whiteners, so their rows are weighted one by one (IRLS).
         sw, rho = robust_weight(b_w[:, 0:2], prob.velocity_loss, ROBUST_K[prob.velocity_loss])
         robust_cost += float(np.sum(rho - 0.5 * (sw * b_w[:, 0:2]) ** 2))
-        A_w = A_w.copy()
-        A_w[:, 0:2, :] *= sw[:, :, None]
+        A_w0[:, 0:2, :] *= sw[:, :, None]
+        A_w1[:, 0:2, :] *= sw[:, :, None]
         b_w[:, 0:2] *= sw
 
     # --- prior on keyframe 0 (world-frame covariance mapped to the body tangent).
@@ -316,7 +364,8 @@ def linearize(prob: Problem, pose: np.ndarray, W: np.ndarray, k0: int = 0, k1: i
     if prob.slip_robust is not None:
         free = ~prob.zero_slip[k0:k1]
         cost += slip_cost - 0.5 * np.sum(b_u[free, 5:7] ** 2)
-    return Linearization(A_u, b_u, A_m0, A_m1, b_m, A_w, b_w, A_p, b_p, float(cost), A_r, A_rb, b_r, A_bp, b_bp)
+    return Linearization(A_u, b_u, A_m0, A_m1, b_m, A_w0, A_w1, b_w, A_p, b_p, float(cost), A_r, A_rb, b_r,
+                         A_bp, b_bp)
 
 
 def motion_sigma(kf: Keyframes, q_w: float) -> np.ndarray:
