@@ -199,3 +199,26 @@ def test_fixed_lag_says_when_it_diverges_on_far_off_nominal_parameters():
     log = import_librsf(Path(__file__).parent / "data" / "librsf" / "Indoor_UWB_Input.txt")
     with pytest.raises(EstimatorDivergedError, match=r"fixed-lag diverged at t=\d+\.\d+ s: .*ranges residuals"):
         run_fixed_lag(log, Schedule(0.0))
+
+
+def test_wheel_speed_units_shrink_the_poor_gps_scale_bias():
+    """With 0.34 m GPS as the only speed reference, plain random walks on the
+    speeds inflate ticks/m by ~2 % (benchmarks/speed_shrinkage.py); wheel-speed
+    units take a fixed share of that off on every seed, and leave a slip-only
+    schedule alone."""
+    from odomgraph.sim.sensor_configs import study_scenario
+    sc = study_scenario(1, 0.34, 0.005)
+    for seed in range(3):
+        log = simulate(sc, seed)
+        sch = Schedule(sc.calibrate_until)
+        ekf = run_ekf(log, sch)
+        units = run_batch(log, sch, SmootherOptions(), initial=ekf).mean[-1, S.SCALE] / sc.scales - 1
+        plain = run_batch(log, sch, SmootherOptions(wheel_speed_units=False), initial=ekf).mean[-1, S.SCALE] \
+            / sc.scales - 1
+        assert np.all(plain[:2] > 0.01)                               # the bias is there...
+        assert np.all(units[:2] < plain[:2] - 0.003)                  # ...and smaller, ticks/m
+        assert units[2] > plain[2] + 0.003                            # and track
+    log = simulate(paper(40), 1)
+    a = run_batch(log, Schedule(0.0), SmootherOptions())
+    b = run_batch(log, Schedule(0.0), SmootherOptions(wheel_speed_units=False))
+    np.testing.assert_array_equal(a.mean, b.mean)

@@ -56,6 +56,11 @@ class SmootherOptions:
     velocity_loss: str | None = None
     """Robust loss of the velocity random walk ("huber", "cauchy"; None: Gaussian).
     For robots whose speed jumps (in-place pivots started and stopped at once)."""
+    wheel_speed_units: bool = True
+    """With a calibration window, take the v, omega and slip random walks in
+    wheel-speed units (graph.linearize): no prior then pays for shrinking the
+    speeds into larger scale factors. False: the plain walks (as isam2,
+    fixed-lag and the EKF)."""
 
 
 def build_problem(log: Log, schedule: Schedule, options: SmootherOptions, causal: bool = False) -> Problem:
@@ -297,7 +302,8 @@ def run_batch(log: Log, schedule: Schedule = Schedule(), options: SmootherOption
     ekf_schedule = schedule if schedule.calibrate_until is not None else Schedule(20.0)
     ekf = initial if initial is not None else run_ekf(log, ekf_schedule)
     pose, W = initial_guess(prob, ekf)
-    prob.speed_ref = W[0, 5:8].copy()       # wheel-speed units of the window's walks (graph.linearize)
+    if options.wheel_speed_units:
+        prob.speed_ref = W[0, 5:8].copy()   # the units of the random walks (graph.linearize)
     pose, W, iters, cost, rb = solve(prob, pose, W, options, progress)
     if not (np.all(np.isfinite(pose)) and np.all(np.isfinite(W))):
         raise EstimatorDivergedError("batch smoother diverged: non-finite estimate")
