@@ -57,7 +57,7 @@ class SmootherOptions:
     """Robust loss of the velocity random walk ("huber", "cauchy"; None: Gaussian).
     For robots whose speed jumps (in-place pivots started and stopped at once)."""
     wheel_speed_units: bool = True
-    """With a calibration window, take the v, omega and slip random walks in
+    """With a calibration window, take the v and slip random walks in
     wheel-speed units (graph.linearize): no prior then pays for shrinking the
     speeds into larger scale factors. False: the plain walks (as isam2,
     fixed-lag and the EKF)."""

@@ -11,7 +11,7 @@ Factors, all built on the models in ``factors/`` (the EKF's models):
 * random walk (W_k, W_{k+1}): of v, omega (white acceleration), gyro bias,
   common-mode and differential slip (as in the EKF) and the scale factors (a
   floor of 1e-5/sqrt(s) keeps the chain free of global variables). With a
-  calibration window the batch smoother takes the v, omega and slip steps in
+  calibration window the batch smoother takes the v and slip steps in
   wheel-speed units (Problem.wheel_speed_units);
 * unary on (X_k, W_k): encoder (eq. 29), gyro (eq. 10), velocity sensor,
   GPS (eq. 8) and range (eq. 12) part-way along the arc (motion.arc_at, at the
@@ -302,28 +302,29 @@ def linearize(prob: Problem, pose: np.ndarray, W: np.ndarray, k0: int = 0, k1: i
     b_w = -np.einsum("kij,kj->ki", A_w, w1 - w0)
     A_w0, A_w1 = -A_w, A_w.copy()
     if prob.wheel_speed_units:
-        # Steps of (mean ticks/m scale) v, scale_track omega and scale x slip,
-        # relative to speed_ref, instead of v, omega and slip. A Gaussian walk
-        # on v itself is cheapest when every speed is small, and the encoder
-        # model lets the scale factors pay for that (k (v + slip) = measured):
-        # the MAP estimate shrinks the speeds, inflating ticks/m and deflating
-        # track by about (walk cost of the manoeuvres) / (GPS information on
-        # the path's size), 2 % at 0.34 m GPS (benchmarks/README.md). In
-        # wheel-speed units that trade earns nothing.
+        # Steps of (mean ticks/m scale) v and scale x slip, relative to
+        # speed_ref, instead of v and slip. A Gaussian walk on v itself is
+        # cheapest when every speed is small, and the encoder model lets the
+        # scale factors pay for that (k (v + slip) = measured): the MAP
+        # estimate shrinks the speeds, inflating ticks/m and deflating track
+        # by about (walk cost of the manoeuvres) / (GPS information on the
+        # path's size), 2 % at 0.34 m GPS (benchmarks/README.md). In
+        # wheel-speed units that trade earns nothing. omega keeps its plain
+        # walk: heading sensors pin its scale, and a walk on scale_track x
+        # omega measured worse (a track bias with a noisy gyro and good GPS).
         ref = np.asarray(prob.speed_ref, float)
         sc0, sc1 = w0[:, 5:8] / ref, w1[:, 5:8] / ref
         A_w0, A_w1 = A_w0.copy(), A_w1.copy()
-        for row, cols, f0, f1 in ((0, [5, 6], 0.5 * (sc0[:, 0] + sc0[:, 1]), 0.5 * (sc1[:, 0] + sc1[:, 1])),
-                                  (1, [7], sc0[:, 2], sc1[:, 2])):
-            a = A_w[:, row, row]                                  # v, omega: diagonal whitener rows
-            b_w[:, row] = -a * (f1 * w1[:, row] - f0 * w0[:, row])
-            A_w0[:, row, :] = 0.0
-            A_w1[:, row, :] = 0.0
-            A_w0[:, row, row] = -a * f0
-            A_w1[:, row, row] = a * f1
-            for c in cols:
-                A_w0[:, row, c] = -a * w0[:, row] / (len(cols) * ref[c - 5])
-                A_w1[:, row, c] = a * w1[:, row] / (len(cols) * ref[c - 5])
+        f0, f1 = 0.5 * (sc0[:, 0] + sc0[:, 1]), 0.5 * (sc1[:, 0] + sc1[:, 1])
+        a = A_w[:, 0, 0]                                          # v: a diagonal whitener row
+        b_w[:, 0] = -a * (f1 * w1[:, 0] - f0 * w0[:, 0])
+        A_w0[:, 0, :] = 0.0
+        A_w1[:, 0, :] = 0.0
+        A_w0[:, 0, 0] = -a * f0
+        A_w1[:, 0, 0] = a * f1
+        for c in (5, 6):
+            A_w0[:, 0, c] = -a * w0[:, 0] / (2 * ref[c - 5])
+            A_w1[:, 0, c] = a * w1[:, 0] / (2 * ref[c - 5])
         L = A_w[:, 3:5, 3:5]                                      # slips: a 2x2 block
         b_w[:, 3:5] = -np.einsum("kij,kj->ki", L, sc1[:, 0:2] * w1[:, 3:5] - sc0[:, 0:2] * w0[:, 3:5])
         A_w0[:, 3:5, :] = 0.0
