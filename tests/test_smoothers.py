@@ -183,7 +183,8 @@ def test_keyframe_fixes_use_the_wheel_travel_inside_the_interval():
     err = est.mean[-1, 8:11] / np.array(sc.scales) - 1
     assert np.all(np.abs(err) < 1e-4), err
     kf = build_problem(log, Schedule(20.0), SmootherOptions()).kf
-    tvw, tau = kf.gps_tau_vw, kf.gps_tau
+    g = log.gps.t[(log.gps.t >= kf.t[0]) & (log.gps.t < kf.t[-1])]   # the fixes the keyframes hold, in order
+    tvw, tau = kf.gps_tau_vw, g - kf.t[kf.gps_k]                    # effective and plain time after t_k
     assert np.all((tvw >= 0) & (tvw <= kf.dt[kf.gps_k][:, None] + 1e-12))
     accel = np.abs(tvw[:, 0] - tau) > 0.01          # fixes inside intervals where the speed changes
     assert 0.02 < accel.mean() < 0.5

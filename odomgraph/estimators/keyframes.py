@@ -50,26 +50,24 @@ class Keyframes:
     """(N-1,) velocity samples inside each interval."""
     gps_k: np.ndarray
     """(G,) interval of each GPS fix."""
-    gps_tau: np.ndarray
-    """(G,) time of the fix after t_k [s]."""
+    gps_tau_vw: np.ndarray
+    """(G, 2) effective times (tau_v, tau_omega) of each fix after t_k
+    (motion.arc_at): the share of the interval's wheel travel, and of the
+    wheels' difference, done by the fix time, times dt [s]."""
     gps_xy: np.ndarray
     """(G, 2) antenna position [m]."""
     gps_sigma: np.ndarray
     """(G,) 1-sigma [m]."""
     rng_k: np.ndarray
-    rng_tau: np.ndarray
+    """(R,) interval of each range."""
+    rng_tau_vw: np.ndarray
+    """(R, 2) the same effective times for each range."""
     rng_beacon: np.ndarray
     """(R, 2) beacon position [m]."""
     rng_z: np.ndarray
     """(R,) measured range [m]."""
-    rng_id: np.ndarray | None = None
+    rng_id: np.ndarray
     """(R,) index of the beacon in robot.beacons."""
-    gps_tau_vw: np.ndarray | None = None
-    """(G, 2) effective times (tau_v, tau_omega) of each fix (motion.arc_at): the
-    share of the interval's wheel travel, and of the wheels' difference, done
-    by the fix time, times dt [s]."""
-    rng_tau_vw: np.ndarray | None = None
-    """(R, 2) the same for each range."""
 
     @property
     def dt(self) -> np.ndarray:
@@ -202,8 +200,7 @@ def _bridge_variance(ts, a, b, ja, jb, last):
     h = np.where(bridge, segr - segl, 1.0)
     base = np.where(left_pinned, segl, 0.0)
     pin = np.where(bridge, ((u1 - base) ** 2 - (u0 - base) ** 2) ** 2 / (4 * h), 0.0)
-    model = np.where((j <= jb[:, None]) & (L > 0), d0 * L**2 + L**3 / 3 - pin, 0.0).sum(1)
-    return model
+    return np.where((j <= jb[:, None]) & (L > 0), d0 * L**2 + L**3 / 3 - pin, 0.0).sum(1)
 
 
 def build_keyframes(log: Log, t_start: float, keyframe_hz: float, causal: bool = False) -> Keyframes:
@@ -283,25 +280,25 @@ def build_keyframes(log: Log, t_start: float, keyframe_hz: float, causal: bool =
         vel_z, vel_sd, vel_n = interval_means(t, log.velocity.t, np.stack([log.velocity.v, log.velocity.omega], -1),
                                               r.velocity_sigma, (pn.accel, pn.yaw_accel), causal)
     empty2 = np.zeros((0, 2))
-    gk = gt = gs = np.zeros(0)
+    gk = gs = np.zeros(0)
     gxy = gvw = empty2
     if log.gps is not None and len(log.gps.t):
         g = log.gps
         k, inside = _bin(t, g.t)
-        gk, gt = k[inside], g.t[inside] - t[k[inside]]
+        gk = k[inside]
         gvw = effective(gk, g.t[inside])
         gxy = np.stack([g.x, g.y], -1)[inside]
         gs = (g.sigma if g.sigma is not None else np.full(len(g.t), r.gps_sigma))[inside]
-    rk = rt = rz = rid = np.zeros(0)
+    rk = rz = rid = np.zeros(0)
     rb = rvw = empty2
     if log.ranges is not None and len(log.ranges.t):
         rg = log.ranges
         k, inside = _bin(t, rg.t)
-        rk, rt, rz = k[inside], rg.t[inside] - t[k[inside]], rg.range[inside]
+        rk, rz = k[inside], rg.range[inside]
         rvw = effective(rk, rg.t[inside])
         rb = np.asarray([[bc.x, bc.y] for bc in r.beacons])[rg.beacon[inside]]
         rid = rg.beacon[inside]
     return Keyframes(t=t, enc_m=m, enc_sigma=sigma, gyro_z=gyro_z, gyro_sigma=gyro_sd, gyro_n=np.asarray(gyro_n),
-                     vel_z=vel_z, vel_sigma=vel_sd, vel_n=np.asarray(vel_n), gps_k=gk.astype(int), gps_tau=gt,
-                     gps_xy=gxy, gps_sigma=gs, rng_k=rk.astype(int), rng_tau=rt, rng_beacon=rb, rng_z=rz,
-                     rng_id=np.asarray(rid, int), gps_tau_vw=gvw, rng_tau_vw=rvw)
+                     vel_z=vel_z, vel_sigma=vel_sd, vel_n=np.asarray(vel_n), gps_k=gk.astype(int), gps_tau_vw=gvw,
+                     gps_xy=gxy, gps_sigma=gs, rng_k=rk.astype(int), rng_tau_vw=rvw, rng_beacon=rb, rng_z=rz,
+                     rng_id=np.asarray(rid, int))
