@@ -1,23 +1,76 @@
 """The ``odomgraph`` command line: a thin layer over ``odomgraph.pipeline``.
 
 Heavy imports happen inside the commands so that ``--help`` is instant.
-Known errors become one line on stderr and exit code 1.
+Known errors, bad option values included, become one line on stderr,
+``odomgraph: error: ...``, and exit code 1. SIGTERM is handled as Ctrl-C:
+outputs are written atomically, so either stops leaves nothing half-written.
 """
 from __future__ import annotations
 
 import functools
+import signal
 import sys
 from enum import Enum
 from pathlib import Path
 from typing import Annotated, Optional
 
 import typer
+from typer.core import TyperGroup
+
+try:                                   # typer >= 0.20 carries its own copy of click
+    from typer._click import exceptions as _click_exc
+except ImportError:                    # pragma: no cover - older typer on real click
+    from click import exceptions as _click_exc
+
+
+class _OneLineErrors(TyperGroup):
+    """Usage errors (a bad option value, an unknown option) as one line and exit 1,
+    like every other error, instead of click's boxed usage text and exit 2."""
+
+    def main(self, args=None, prog_name=None, complete_var=None, standalone_mode=True, **extra):
+        try:
+            rv = super().main(args=args, prog_name=prog_name, complete_var=complete_var, standalone_mode=False,
+                              **extra)
+        except _click_exc.NoArgsIsHelpError as exc:
+            typer.echo(exc.ctx.get_help() if exc.ctx else exc.format_message())
+            rv = 0
+        except _click_exc.ClickException as exc:
+            msg = " ".join(exc.format_message().split())
+            if isinstance(exc, _click_exc.UsageError) and exc.ctx is not None:
+                msg = f"{exc.ctx.command_path}: {msg}"
+            typer.echo(f"odomgraph: error: {msg}", err=True)
+            rv = 1
+        except typer.Abort:
+            typer.echo("odomgraph: interrupted; nothing was written", err=True)
+            rv = 130
+        if not standalone_mode:
+            return rv
+        sys.exit(rv if isinstance(rv, int) else 0)
+
+
+def _version(value: bool):
+    if value:
+        from odomgraph import __version__
+        typer.echo(f"odomgraph {__version__}")
+        raise typer.Exit()
+
 
 app = typer.Typer(
+    cls=_OneLineErrors,
     help="Wheel-odometry error estimation (scale factors + per-wheel slip) for differential-drive robots.\n\n"
          "Logs and outputs follow LOG_FORMAT.md. Start with `odomgraph demo`.",
     no_args_is_help=True, add_completion=False, pretty_exceptions_enable=False,
+    # Plain help text: rich markup would eat units written as [m] or [s].
+    rich_markup_mode=None, context_settings={"help_option_names": ["-h", "--help"]},
 )
+
+
+@app.callback()
+def _root(version: Annotated[bool, typer.Option("--version", callback=_version, is_eager=True,
+                                                help="Print the version and exit.")] = False):
+    """Wheel-odometry error estimation (scale factors + per-wheel slip) for differential-drive robots.
+
+    Logs and outputs follow LOG_FORMAT.md. Start with `odomgraph demo`."""
 
 
 class ScenarioName(str, Enum):
@@ -48,19 +101,33 @@ class HoldName(str, Enum):
     pseudo = "pseudo"
 
 
+class Terminated(KeyboardInterrupt):
+    """SIGTERM, raised like Ctrl-C so that every cleanup (temporary output
+    directories, worker pools) runs."""
+
+
+def _on_sigterm(signum, frame):
+    raise Terminated()
+
+
 def _user_errors(fn):
-    """Turn the project's known errors into one line and exit 1."""
+    """Turn the project's known errors, and any failure to read or write a
+    file, into one line and exit 1."""
     @functools.wraps(fn)
     def wrapper(*args, **kwargs):
         from odomgraph.errors import OdomgraphError
         try:
             return fn(*args, **kwargs)
         except OdomgraphError as exc:
-            typer.echo(f"odomgraph: error: {exc}", err=True)
+            typer.echo(f"odomgraph: error: {' '.join(str(exc).split())}", err=True)
             raise typer.Exit(code=1)
-        except KeyboardInterrupt:
+        except KeyboardInterrupt as exc:
             typer.echo("odomgraph: interrupted; nothing was written", err=True)
-            raise typer.Exit(code=130)
+            raise typer.Exit(code=143 if isinstance(exc, Terminated) else 130)
+        except OSError as exc:
+            where = f"{exc.filename}: " if exc.filename else ""
+            typer.echo(f"odomgraph: error: {where}{exc.strerror or exc}", err=True)
+            raise typer.Exit(code=1)
     return wrapper
 
 
@@ -68,6 +135,11 @@ class _Progress:
     """A rich progress bar on stderr, fed by an estimator's progress(done, total)."""
 
     def __init__(self, label: str):
+        # Only on a terminal: piped into a file, a bar is noise (and rich
+        # leaves an empty line behind).
+        self._on = sys.stderr.isatty()
+        if not self._on:
+            return
         from rich.console import Console
         from rich.progress import BarColumn, Progress, TimeElapsedColumn, TimeRemainingColumn, TextColumn
         self._p = Progress(TextColumn(label), BarColumn(), TextColumn("{task.percentage:>3.0f}%"),
@@ -76,13 +148,16 @@ class _Progress:
         self._task = None
 
     def __enter__(self):
-        self._p.__enter__()
+        if self._on:
+            self._p.__enter__()
         return self
 
     def __exit__(self, *exc):
-        return self._p.__exit__(*exc)
+        return self._p.__exit__(*exc) if self._on else None
 
     def __call__(self, done: int, total: int):
+        if not self._on:
+            return
         if self._task is None:
             self._task = self._p.add_task("", total=total)
         self._p.update(self._task, completed=done)
@@ -95,6 +170,8 @@ class _MultiProgress(_Progress):
         super().__init__("{task.description:<18}")
 
     def __call__(self, label: str):
+        if not self._on:
+            return None
         task = self._p.add_task(label, total=1)
 
         def update(done: int, total: int):
@@ -153,6 +230,8 @@ def _print_summary(s: dict) -> None:
         typer.echo(f"  range bias {b:<8} {v['value']:+.3f} ± {v['sigma']:.3f} m")
     for n in s["notes"]:
         typer.echo(f"  note: {n}")
+    for w in s.get("warnings", []):
+        typer.echo(f"odomgraph: warning: {' '.join(str(w).split())}", err=True)
 
 
 @app.command()
@@ -181,34 +260,37 @@ def simulate(
     initial: Annotated[bool, typer.Option(help="Write the true start pose as robot.toml [initial].")] = False,
 ):
     """Simulate a scenario and write a log directory with truth.csv and truth.toml."""
+    import math
     from odomgraph.errors import OdomgraphError
     from odomgraph.io.log import write_log
     from odomgraph.sim.scenarios import SCENARIOS, SlipEvent
     from odomgraph.sim.simulate import beacons_around_path, simulate as run_sim
 
+    from odomgraph.io.outdir import check_output
+    check_output(output)
+    if duration is not None and not (0 < duration <= 1e6):
+        raise OdomgraphError(f"--duration must be positive (and at most 1e6 s), got {duration:g}")
     sc = SCENARIOS[scenario.value]() if duration is None else SCENARIOS[scenario.value](duration)
-    if duration is not None and duration <= 0:
-        raise OdomgraphError("--duration must be positive")
 
     def floats(text, n, opt):
         try:
             vals = tuple(float(v) for v in text.split(","))
         except ValueError:
             vals = ()
-        if len(vals) != n:
-            raise OdomgraphError(f"{opt}: expected {n} comma-separated numbers, got {text!r}")
+        if len(vals) != n or not all(math.isfinite(v) for v in vals):
+            raise OdomgraphError(f"{opt}: expected {n} comma-separated finite numbers, got {text!r}")
         return vals
 
     rates = {k: v for k, v in dict(encoders=encoder_hz, gyro=gyro_hz, gps=gps_hz, ranges=range_hz,
                                      velocity=velocity_hz).items() if v is not None}
-    if any(v < 0 for v in rates.values()) or rates.get("encoders", 1) == 0:
-        raise OdomgraphError("sensor rates must be >= 0 and the encoder rate > 0")
+    if any(not 0 <= v <= 1e4 for v in rates.values()) or rates.get("encoders", 1) == 0:
+        raise OdomgraphError("sensor rates must be between 0 and 1e4 Hz, and the encoder rate > 0")
     sc = sc.with_(rates=sc.rates.__class__(**{**sc.rates.__dict__, **rates}))
     robot = sc.robot
     for name, val in (("gps_sigma", gps_sigma), ("gyro_sigma", gyro_sigma), ("range_sigma", range_sigma)):
         if val is not None:
-            if val <= 0:
-                raise OdomgraphError(f"--{name.replace('_', '-')} must be positive")
+            if not val > 0:
+                raise OdomgraphError(f"--{name.replace('_', '-')} must be positive, got {val:g}")
             robot = robot.with_(**{name: val})
     if encoder_sigma is not None:
         robot = robot.with_(encoder_sigma=floats(encoder_sigma, 2, "--encoder-sigma"))
@@ -217,6 +299,8 @@ def simulate(
     sc = sc.with_(robot=robot, write_initial=initial)
     if scales is not None:
         sc = sc.with_(scales=floats(scales, 3, "--scales"))
+        if not all(0.2 < v < 5 for v in sc.scales):
+            raise OdomgraphError(f"--scales: each scale factor must be between 0.2 and 5, got {scales!r}")
     if no_slip:
         sc = sc.with_(slips=())
     elif slip:
@@ -368,8 +452,11 @@ def montecarlo(
     from odomgraph.errors import OdomgraphError
     if config not in (1, 2, 3):
         raise OdomgraphError(f"--config must be 1, 2 or 3, got {config}")
-    if runs < 1 or grid < 2 or duration < 30:
-        raise OdomgraphError("need --runs >= 1, --grid >= 2 and --duration >= 30 s (20 s of calibration, then slip)")
+    if runs < 1 or grid < 2 or not 30 <= duration <= 1e5:
+        raise OdomgraphError("need --runs >= 1, --grid >= 2 and --duration between 30 s (20 s of calibration, "
+                             "then slip) and 1e5 s")
+    if workers is not None and workers < 1:
+        raise OdomgraphError(f"--workers must be at least 1, got {workers}")
     spec = StudySpec.grid(config, grid, runs=runs, duration=duration, seed=seed, smoother=smoother)
     try:
         with _Progress(f"config {config}: {grid}x{grid} points x {runs} runs") as bar:
@@ -402,24 +489,12 @@ def calibrate(
 ):
     """Estimate corrected ticks per metre and track width from a calibration log and write them
     (with their 1-sigma) as a robot.toml. Run it once after changing tyres."""
-    import os
-    import tempfile
     from odomgraph.io.log import read_log
-    from odomgraph.io.robot import robot_toml
-    from odomgraph.pipeline import Method, calibrate as run_calibration
+    from odomgraph.pipeline import Method, calibrate_to_file
     schedule = _parse_schedule(calibrate_until, HoldName.consider)
     log = read_log(log_dir)
     with _Progress(f"calibrate ({method.value})") as bar:
-        new, rep = run_calibration(log, schedule, Method(method.value), progress=bar, tune=tune)
-    extra = {"calibration": {
-        "from_log": str(log_dir), "method": rep["method"],
-        "ticks_per_meter_left_sigma": rep["ticks_per_meter_left"]["sigma"],
-        "ticks_per_meter_right_sigma": rep["ticks_per_meter_right"]["sigma"],
-        "track_width_sigma": rep["track_width"]["sigma"]}}
-    fd, tmp = tempfile.mkstemp(prefix=f".{output.name}.", dir=output.parent if str(output.parent) else ".")
-    with os.fdopen(fd, "w", encoding="utf-8") as fh:
-        fh.write(robot_toml(new, extra))
-    os.replace(tmp, output)
+        new, rep = calibrate_to_file(log, output, schedule, Method(method.value), progress=bar, tune=tune)
     r = log.robot
     for key, old in (("ticks_per_meter_left", r.ticks_per_meter_left),
                      ("ticks_per_meter_right", r.ticks_per_meter_right), ("track_width", r.track_width)):
@@ -463,6 +538,9 @@ def import_(
     """Convert another dataset's files into a log directory (LOG_FORMAT.md)."""
     from odomgraph.errors import OdomgraphError
     from odomgraph.io.log import write_log
+    from odomgraph.io.outdir import check_output
+    inputs = (source, metadata, ground_truth)
+    check_output(output, inputs)
     if kind is ImportKind.optiodom:
         from odomgraph.io.importers.optiodom import import_optiodom
         log = import_optiodom(source, metadata, fixes_hz, fix_sigma)
@@ -480,11 +558,12 @@ def import_(
     else:
         from odomgraph.io.importers.librsf import import_librsf
         log = import_librsf(source, ground_truth)
-    write_log(log, output)
+    write_log(log, output, inputs)
     typer.echo(f"wrote {output} ({'; '.join(log.notes)})")
 
 
 def main() -> None:
+    signal.signal(signal.SIGTERM, _on_sigterm)
     app()
 
 

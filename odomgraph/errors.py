@@ -24,3 +24,7 @@ class EstimatorDivergedError(OdomgraphError):
 
 class OutputDirError(OdomgraphError):
     """The output directory cannot be written safely."""
+
+
+class OptionError(OdomgraphError):
+    """An option or parameter outside its declared range (odomgraph.checks)."""

@@ -29,9 +29,12 @@ def estimate(log: Log, method: Method = Method.ekf, schedule: Schedule = Schedul
              **options) -> Estimate:
     """Run one estimator over a log. ``progress(done, total)`` is optional.
 
-    Options are those of the method's options dataclass (EKFOptions,
-    SmootherOptions, IncrementalOptions); None values mean the default.
+    ``method`` is a Method or its name. Options are those of the method's
+    options dataclass (EKFOptions, SmootherOptions, IncrementalOptions); None
+    values mean the default. An unknown method or option is an OptionError.
     """
+    method = parse_method(method)
+    _check_option_names(options)
     options = {k: v for k, v in options.items() if v is not None}
     if options.get("range_bias") and method is not Method.batch:
         from odomgraph.errors import OdomgraphError
@@ -51,13 +54,59 @@ def estimate(log: Log, method: Method = Method.ekf, schedule: Schedule = Schedul
     return run(log, schedule, IncrementalOptions(**_only(IncrementalOptions, options)), progress)
 
 
+def parse_method(method) -> Method:
+    """A Method from itself or its name; OptionError listing the valid ones otherwise."""
+    from odomgraph.errors import OptionError
+    try:
+        return Method(method.value if isinstance(method, Enum) else method)
+    except ValueError:
+        raise OptionError(f"unknown method {method!r}; valid: {', '.join(m.value for m in Method)}") from None
+
+
+def _check_option_names(options: dict) -> None:
+    """Every option must belong to some estimator's options (a typo is an error,
+    not a default), and lie in its declared range even where this method does
+    not use it (the CLI passes one set to every method)."""
+    from odomgraph.checks import field_ranges, option_name, unknown_names, value_problem, value_text
+    from odomgraph.errors import OptionError
+    from odomgraph.estimators.ekf import EKFOptions
+    from odomgraph.estimators.incremental import IncrementalOptions
+    known = {*EKFOptions.__dataclass_fields__, *IncrementalOptions.__dataclass_fields__}
+    msg = unknown_names(list(options), known, "option")
+    if msg:
+        raise OptionError(msg)
+    ranges = field_ranges(EKFOptions) | field_ranges(IncrementalOptions)
+    for k, v in options.items():
+        if v is not None and k in ranges and (problem := value_problem(v, ranges[k])):
+            raise OptionError(f"{k} ({option_name(k)}) {problem}, got {value_text(v)}")
+
+
 def _only(cls, options: dict) -> dict:
     """The options that ``cls`` takes (the CLI passes one set for every method)."""
     return {k: v for k, v in options.items() if k in cls.__dataclass_fields__}
 
 
+def warnings_of(est: Estimate) -> list[str]:
+    """Everything the user must know to trust ``est``, one line each: the
+    estimator's own warnings, then each scale combination the log does not
+    determine."""
+    out = list(est.warnings)
+    unobs = est.unobservable()
+    pinned = est.observability.unobservable if est.observability else {}
+    for name, reason in unobs.items():
+        held = " (held at nominal, reported with its prior sigma)" if name in pinned else ""
+        out.append(f"{name} is not determined by this log{held}: {reason}")
+    if "scale_common" in pinned and len(pinned) < 3:
+        rest = [n for n in ("scale_ratio", "scale_track") if n not in unobs]
+        if rest:
+            out.append(f"{' and '.join(rest)} are estimated relative to the nominal common wheel scale "
+                       "(summary.json scale_combinations)")
+    return out
+
+
 def summary(est: Estimate, log: Log, schedule: Schedule) -> dict:
     """summary.json content (LOG_FORMAT.md plus consistency and throughput)."""
+    from odomgraph.estimators.observability import combinations_of
     out = {
         "method": est.method,
         "log": str(log.path) if log.path else None,
@@ -68,8 +117,13 @@ def summary(est: Estimate, log: Log, schedule: Schedule) -> dict:
         "schedule": {"calibrate_until": schedule.calibrate_until, "hold": schedule.hold.value,
                      "t_switch": est.t_switch},
         "calibration": est.calibration,
+        "unobservable": est.unobservable(),
+        # (common, right/left ratio, track) with their sigma as the estimator
+        # solved them: with unobservable combinations held at nominal.
+        "scale_combinations": combinations_of(est.mean[-1, 8:11], est.scale_cov(given=True)),
         **({"range_bias": est.range_bias} if est.range_bias is not None else {}),
         "nis": nis_summary(est),
+        "warnings": warnings_of(est),
         "notes": est.notes,
     }
     if est.update_times is not None and len(est.update_times) >= 10:
@@ -90,11 +144,17 @@ def summary(est: Estimate, log: Log, schedule: Schedule) -> dict:
 
 
 def estimate_to_dir(log: Log, out: Path, method: Method, schedule: Schedule, progress=None, **options) -> dict:
-    """Estimate and write the estimate directory; returns the summary."""
+    """Estimate and write the estimate directory; returns the summary.
+
+    The output is checked before the work starts (io.outdir): it must not be,
+    hold or lie inside the log."""
     from odomgraph.io.estimate import write_estimate
+    from odomgraph.io.outdir import check_output
+    inputs = (log.path,) if log.path else ()
+    check_output(out, inputs)
     est = estimate(log, method, schedule, progress, **options)
     summ = summary(est, log, schedule)
-    write_estimate(est, out, summ)
+    write_estimate(est, out, summ, inputs)
     return summ
 
 
@@ -217,6 +277,41 @@ def calibrate(log: Log, schedule: Schedule = Schedule(calibrate_until=None), met
     return new, report
 
 
+def _is_calibration_file(path: Path) -> bool:
+    """A robot.toml that ``calibrate_to_file`` wrote (its [calibration] record says so)."""
+    import tomllib
+    from odomgraph.errors import LogFormatError
+    from odomgraph.io.csvtable import read_text
+    try:
+        return tomllib.loads(read_text(path)).get("calibration", {}).get("written_by") == "odomgraph calibrate"
+    except (LogFormatError, tomllib.TOMLDecodeError, AttributeError):
+        return False
+
+
+def calibrate_to_file(log: Log, out: Path, schedule: Schedule = Schedule(calibrate_until=None),
+                      method: Method = Method.batch, progress=None, tune: bool = True, **options):
+    """``calibrate`` and write the calibrated robot.toml to ``out`` (atomically).
+
+    The output is checked before the work starts: it must not lie inside the
+    log (``-o LOG/robot.toml`` would overwrite the input), and an existing
+    file is replaced only if an earlier calibration wrote it. Returns
+    (RobotConfig, report) as ``calibrate``."""
+    from odomgraph.io.outdir import atomic_output_file, check_output
+    from odomgraph.io.robot import robot_toml
+    inputs = (log.path,) if log.path else ()
+    check_output(out, inputs, directory=False)
+    new, rep = calibrate(log, schedule, method, progress, tune, **options)
+    extra = {"calibration": {
+        "written_by": "odomgraph calibrate",
+        "from_log": str(log.path) if log.path else "", "method": rep["method"],
+        "ticks_per_meter_left_sigma": rep["ticks_per_meter_left"]["sigma"],
+        "ticks_per_meter_right_sigma": rep["ticks_per_meter_right"]["sigma"],
+        "track_width_sigma": rep["track_width"]["sigma"]}}
+    with atomic_output_file(out, inputs, is_ours=_is_calibration_file) as tmp:
+        tmp.write_text(robot_toml(new, extra), encoding="utf-8")
+    return new, rep
+
+
 def compare_to_dir(log: Log, out: Path, schedule: Schedule, progress_for=None, title: str | None = None,
                    include_log: bool = False, **options):
     """Run the EKF, iSAM2 and batch on ``log`` and write the comparison directory
@@ -229,10 +324,12 @@ def compare_to_dir(log: Log, out: Path, schedule: Schedule, progress_for=None, t
     from odomgraph.analysis.report import write_report
     from odomgraph.io.estimate import write_estimate
     from odomgraph.io.log import write_log
-    from odomgraph.io.outdir import atomic_output_dir
+    from odomgraph.io.outdir import atomic_output_dir, check_output
+    inputs = (log.path,) if log.path and not include_log else ()
+    check_output(out, inputs)
     cmp = run_comparison(log, schedule, progress_for, **options)
     title = title or f"odomgraph: EKF vs smoother on {log.path.name if log.path else 'a log'}"
-    with atomic_output_dir(out) as d:
+    with atomic_output_dir(out, inputs, kind="report") as d:
         if include_log:
             write_log(log, d / "log")
         for label, est in cmp.estimates.items():

@@ -29,7 +29,7 @@ def estimated(tmp_path_factory, paper_log_dir):
 
 def test_estimate_writes_the_contract_files(estimated):
     out, output = estimated
-    assert sorted(p.name for p in out.iterdir()) == ["states.csv", "summary.json", "trajectory.tum"]
+    assert sorted(p.name for p in out.iterdir() if p.name != ".odomgraph") == ["states.csv", "summary.json", "trajectory.tum"]
     header = (out / "states.csv").read_text().splitlines()[0]
     assert header.split(",") == STATE_COLUMNS
     data = np.loadtxt(out / "states.csv", delimiter=",", skiprows=1)
@@ -45,12 +45,13 @@ def test_estimate_writes_the_contract_files(estimated):
     s = json.loads((out / "summary.json").read_text())
     assert s["method"] == "ekf" and s["n_steps"] == data.shape[0] and s["wall_time_s"] > 0
     for k in ("scale_left", "scale_right", "scale_track"):
-        assert set(s["calibration"][k]) == {"value", "sigma"}
+        assert set(s["calibration"][k]) == {"value", "sigma", "observable"} and s["calibration"][k]["observable"]
     e = s["errors"]
     assert e["rms_position_m"] < 0.05
     assert set(e["rms_slip_mps"]) == {"left", "right"} and set(e["final_scale_error"]) == {"left", "right", "track"}
     # the final row of states.csv is the calibration
     assert s["calibration"]["scale_track"]["value"] == pytest.approx(data[-1, 11], rel=1e-8)
+    assert s["unobservable"] == {} and s["warnings"] == []
     assert "scale_left" in output and "updates/s" in output
 
 
@@ -60,7 +61,7 @@ def test_simulate_options(tmp_path):
               "--gyro-hz", "0", "--range-hz", "4", "--scales", "1.01,0.99,1.02",
               "--slip", "left:10:12:0.3", "--initial", "-o", out)
     assert res.exit_code == 0, res.output
-    names = sorted(p.name for p in out.iterdir())
+    names = sorted(p.name for p in out.iterdir() if p.name != ".odomgraph")
     assert names == ["encoders.csv", "gps.csv", "ranges.csv", "robot.toml", "truth.csv", "truth.toml"]
     assert "scale_left = 1.01" in (out / "truth.toml").read_text()
     assert "[initial]" in (out / "robot.toml").read_text()
@@ -103,7 +104,7 @@ def test_refuses_to_overwrite_a_foreign_directory(paper_log_dir, tmp_path):
     foreign = tmp_path / "thesis"
     foreign.mkdir()
     (foreign / "chapter1.tex").write_text("precious")
-    one_line_error(run("estimate", paper_log_dir, "-o", foreign), "not written by odomgraph")
+    one_line_error(run("estimate", paper_log_dir, "-o", foreign), "files odomgraph did not write", "chapter1.tex")
     assert (foreign / "chapter1.tex").read_text() == "precious"
 
 
@@ -134,7 +135,7 @@ def test_smoother_methods_write_the_contract_files(tmp_path, method):
     out = tmp_path / method
     res = run("estimate", log, "--method", method, "--keyframe-hz", "5", "--lag", "3", "-o", out)
     assert res.exit_code == 0, res.output
-    files = sorted(p.name for p in out.iterdir())
+    files = sorted(p.name for p in out.iterdir() if p.name != ".odomgraph")
     expected = ["states.csv", "summary.json", "trajectory.tum"] + (["online.csv"] if method == "isam2" else [])
     assert files == sorted(expected)
     assert (out / "states.csv").read_text().splitlines()[0].split(",") == STATE_COLUMNS

@@ -24,11 +24,13 @@ from factors import pose2
 from factors._math import wrap_angle
 from factors.motion import propagate
 from odomgraph import state as S
+from odomgraph.checks import bounded, check_fields
 from odomgraph.errors import EstimatorDivergedError
 from odomgraph.estimators.graph import NB, Linearization, Problem, linearize
 from odomgraph.estimators.initial import initial_state
 from odomgraph.estimators.keyframes import build_keyframes
 from odomgraph.estimators.measurements import from_log, slip_intensity
+from odomgraph.estimators.observability import decondition
 from odomgraph.estimators.result import Estimate
 from odomgraph.estimators.schedule import Schedule
 from odomgraph.io.log import Log
@@ -36,24 +38,24 @@ from odomgraph.io.log import Log
 
 @dataclass(frozen=True)
 class SmootherOptions:
-    keyframe_hz: float = 5.0
+    keyframe_hz: float = bounded(5.0, gt=0, le=1000)
     """Keyframe rate [Hz] (at most the encoder rate); slip is resolved at this rate."""
-    max_iterations: int = 50
-    rel_tol: float = 1e-7
+    max_iterations: int = bounded(50, ge=1, integer=True)
+    rel_tol: float = bounded(1e-7, gt=0, lt=1)
     """Stop when the cost decreases by less than this fraction."""
-    robust: str | None = None
+    robust: str | None = bounded(None, choices=("huber", "cauchy"), optional=True)
     """Robust loss of GPS fixes and ranges: "huber", "cauchy" or None (Gaussian)."""
-    robust_k: float | None = None
+    robust_k: float | None = bounded(None, gt=0, optional=True)
     """Its threshold in sigmas (None: the loss's 95 %-efficiency default)."""
-    slip_cauchy: float | None = 0.005
+    slip_cauchy: float | None = bounded(0.005, gt=0, optional=True)
     """Cauchy scale [m/s] of the sparse zero-slip prior outside the calibration
     window (the whole log with ``calibrate_until=None``). None: no prior there,
     slip is a free random walk after the window as in the EKF."""
     range_bias: bool = False
     """Estimate a constant range bias per beacon (UWB antenna delays, NLOS offsets)."""
-    range_bias_sigma: float = 0.5
+    range_bias_sigma: float = bounded(0.5, gt=0)
     """Prior 1-sigma of each range bias [m]."""
-    velocity_loss: str | None = None
+    velocity_loss: str | None = bounded(None, choices=("huber", "cauchy"), optional=True)
     """Robust loss of the velocity random walk ("huber", "cauchy"; None: Gaussian).
     For robots whose speed jumps (in-place pivots started and stopped at once)."""
     wheel_speed_units: bool = True
@@ -61,6 +63,9 @@ class SmootherOptions:
     wheel-speed units (graph.linearize): no prior then pays for shrinking the
     speeds into larger scale factors. False: the plain walks (as isam2,
     fixed-lag and the EKF)."""
+
+    def __post_init__(self):
+        check_fields(self)
 
 
 def build_problem(log: Log, schedule: Schedule, options: SmootherOptions, causal: bool = False) -> Problem:
@@ -87,7 +92,7 @@ def build_problem(log: Log, schedule: Schedule, options: SmootherOptions, causal
         raise OdomgraphError("--range-bias: the log has no ranges to estimate a bias from")
     return Problem(kf, log.robot, mean, cov, zero, robust, slip_intensity(log.robot.process, meas), options.robust,
                    options.robust_k, options.range_bias_sigma if options.range_bias else None,
-                   options.velocity_loss)
+                   options.velocity_loss, init=init)
 
 
 def initial_guess(prob: Problem, ekf: Estimate) -> tuple[np.ndarray, np.ndarray]:
@@ -263,6 +268,17 @@ def marginal_blocks(prob: Problem, pose: np.ndarray, W: np.ndarray, range_bias: 
     return Sig, Sgg
 
 
+def honest_blocks(prob: Problem, Sig: np.ndarray) -> np.ndarray:
+    """Keyframe block marginals (N, 11, 11) with the prior uncertainty of the
+    pinned scale combinations given back (observability.decondition); Sig
+    itself when nothing is pinned. Each block holds its keyframe's scale copy,
+    so the pose-scale cross-covariance the correction needs is in the block."""
+    obs = prob.init.observability if prob.init is not None else None
+    if obs is None or not obs.unobservable:
+        return Sig
+    return decondition(Sig, obs, [8, 9, 10], obs.prior_sigma)
+
+
 def keyframe_rows(prob: Problem, pose: np.ndarray, W: np.ndarray, Sig: np.ndarray | None, method: str,
                   rows: slice = slice(None)) -> Estimate:
     """States at interval midpoints: the pose flown half an interval from X_k, W_k's averages.
@@ -310,6 +326,8 @@ def run_batch(log: Log, schedule: Schedule = Schedule(), options: SmootherOption
     Sig = marginal_blocks(prob, pose, W, rb)
     if rb is not None:
         Sig, Sgg = Sig
+    given = Sig[-1][8:11, 8:11].copy()
+    Sig = honest_blocks(prob, Sig)
     est = keyframe_rows(prob, pose, W, Sig, "batch")
     if rb is not None:
         est.range_bias = {b.id: {"value": float(v), "sigma": float(np.sqrt(Sgg[i, i]))}
@@ -319,6 +337,10 @@ def run_batch(log: Log, schedule: Schedule = Schedule(), options: SmootherOption
     t0 = from_log(log).t_start
     est.t_switch = None if schedule.calibrate_until is None else t0 + schedule.calibrate_until
     est.calibration_sigma = np.sqrt(np.diagonal(Sig[-1])[8:11])
+    est.calibration_cov = Sig[-1][8:11, 8:11].copy()
+    est.calibration_cov_given = given
+    est.observability = prob.init.observability
+    est.warnings = list(prob.init.warnings)
     est.notes = [f"batch: {prob.kf.n} keyframes at {options.keyframe_hz:g} Hz, {iters} LM iterations, "
                  f"final cost {cost:.1f}"] + list(ekf.notes)
     return est

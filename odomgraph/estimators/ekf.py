@@ -29,9 +29,11 @@ from factors import encoder, gps, gyro, pseudo, ranging, velocity
 from factors._math import wrap_angle
 from factors.motion import propagate
 from odomgraph import state as S
+from odomgraph.checks import bounded, check_fields
 from odomgraph.errors import EstimatorDivergedError
 from odomgraph.estimators.initial import InitialState, initial_state
 from odomgraph.estimators.measurements import Measurements, from_log, slip_intensity
+from odomgraph.estimators.observability import decondition
 from odomgraph.estimators.result import Estimate, Innovations
 from odomgraph.estimators.schedule import Hold, Schedule
 from odomgraph.io.log import Log
@@ -53,16 +55,19 @@ _I = np.eye(S.N)
 
 @dataclass(frozen=True)
 class EKFOptions:
-    gate: float | None = None
+    gate: float | None = bounded(None, gt=0, optional=True)
     """Mahalanobis gate on NIS for GPS/range/velocity updates (None: off)."""
-    max_scale_error: float = 0.5
+    max_scale_error: float = bounded(0.5, gt=0, infinite=True)
     """|scale - 1| beyond which the filter is declared diverged."""
-    max_mean_nis: float = 50.0
+    max_mean_nis: float = bounded(50.0, gt=0, infinite=True)
     """Diverged when a sensor's running mean NIS (about its last 50 updates)
     exceeds this many times its dimension: the filter no longer explains the data."""
     slip_states: bool = True
     """False removes the slip states (they stay exactly 0 with zero variance):
     the conventional filter that believes odometry, the paper's fig. 7 baseline."""
+
+    def __post_init__(self):
+        check_fields(self)
 
 
 def event_stream(meas: Measurements, t0: float):
@@ -223,12 +228,14 @@ class EKF:
         rej_ema = [0.0] * len(_DOF)
         n_seen = [0] * len(_DOF)
         stride = max(1, len(t_ev) // 200)
+        obs = self.init.observability
+        pinned = bool(obs.unobservable)
         for k in range(len(t_ev)):
             t, code, i = t_ev[k], code_ev[k], row_ev[k]
             self.predict(t)
             if switch_sigma is None and t_switch is not None and t >= t_switch:
                 # The schedule switches: from here on every update holds the scale factors.
-                switch_sigma = np.sqrt(np.diagonal(self.P)[S.SCALE]).copy()
+                switch_sigma = self.P[_SCALE_IDX, _SCALE_IDX].copy()
                 self.holding_scale = sch.hold is Hold.consider
             x = self.x
             if code == WHEEL:
@@ -245,8 +252,11 @@ class EKF:
                 self._check()
                 out_t[row] = t
                 out_x[row] = self.x
-                out_var[row] = np.diagonal(self.P)
-                out_pose[row] = self.P[0:3, 0:3]
+                # Rows carry honest covariance: what pinned (unobservable)
+                # scale combinations leave uncertain (observability.decondition).
+                Pr = self.P if not pinned else decondition(self.P, obs, S.SCALE, obs.prior_sigma)
+                out_var[row] = np.diagonal(Pr)
+                out_pose[row] = Pr[0:3, 0:3]
                 row += 1
             elif code == GYRO:
                 h, H = gyro.yaw_rate(x[4], x[5])                                      # eq. 10-11
@@ -287,15 +297,17 @@ class EKF:
 
         return make_estimate("ekf" if opt.slip_states else "ekf-no-slip", out_t[:row], out_x[:row], out_var[:row],
                              out_pose[:row], nis, list(m.notes) + [self.init.note], time.perf_counter() - wall0,
-                             n_up, t_switch, switch_sigma, sch.hold)
+                             n_up, t_switch, switch_sigma, sch.hold, self.P[_SCALE_IDX, _SCALE_IDX].copy(),
+                             self.init)
 
 
 def make_estimate(method: str, t, mean, var, pose_cov, nis: dict, notes: list, wall: float, n_up: int,
-                  t_switch, switch_sigma, hold: Hold) -> Estimate:
+                  t_switch, switch_cov, hold: Hold, final_cov, init: InitialState) -> Estimate:
     """The Estimate of one EKF run from its recorded rows.
 
     nis: sensor code -> list of (t, NIS), a negative NIS marking a gated
-    measurement; switch_sigma: (3,) scale sigma at the schedule's switch.
+    measurement; switch_cov: (3, 3) scale covariance at the schedule's switch
+    (None if it never switched); final_cov: (3, 3) at the end.
     """
     sigma = np.sqrt(np.maximum(var, 0.0))
     innov = {}
@@ -306,11 +318,16 @@ def make_estimate(method: str, t, mean, var, pose_cov, nis: dict, notes: list, w
             if (~acc).any():
                 notes.append(f"{SENSOR_NAMES[code]}: {int((~acc).sum())} measurement(s) rejected by the gate")
             innov[SENSOR_NAMES[code]] = Innovations(arr[acc, 0], arr[acc, 1], _DOF[code])
-    cal_sigma = sigma[-1, S.SCALE].copy()
-    if hold is Hold.pseudo and switch_sigma is not None:
-        cal_sigma = switch_sigma  # the pseudo-update's sigma is not an uncertainty
+    given = final_cov
+    if hold is Hold.pseudo and switch_cov is not None:
+        given = switch_cov  # the pseudo-update's sigma is not an uncertainty
+    given = 0.5 * (given + given.T)
+    obs = init.observability
+    cal_cov = decondition(given, obs, [0, 1, 2], obs.prior_sigma) if obs.unobservable else given
     return Estimate(method=method, t=t, mean=mean, sigma=sigma, pose_cov=pose_cov, innovations=innov,
-                    wall_time_s=wall, n_updates=n_up, t_switch=t_switch, calibration_sigma=cal_sigma, notes=notes)
+                    wall_time_s=wall, n_updates=n_up, t_switch=t_switch,
+                    calibration_sigma=np.sqrt(np.maximum(np.diagonal(cal_cov), 0.0)), calibration_cov=cal_cov,
+                    calibration_cov_given=given, observability=obs, warnings=list(init.warnings), notes=notes)
 
 
 def run_ekf(log: Log, schedule: Schedule = Schedule(), options: EKFOptions = EKFOptions(), progress=None) -> Estimate:

@@ -27,6 +27,7 @@ from odomgraph.estimators.ekf import (_DOF, _ENC_IDX, _GYRO_IDX, _POSE_IDX, _SCA
                                       make_estimate)
 from odomgraph.estimators.initial import initial_state
 from odomgraph.estimators.measurements import from_log, slip_intensity
+from odomgraph.estimators.observability import decondition
 from odomgraph.estimators.result import Estimate
 from odomgraph.estimators.schedule import Hold, Schedule
 from odomgraph.io.log import Log
@@ -85,6 +86,7 @@ def run_ekf_many(logs: list[Log], schedule: Schedule = Schedule(), options: EKFO
     streams = [event_stream(m, inits[0].t) for m in meas]
     _check_same_timing(logs, streams)
     t_ev, code_ev, row_ev = streams[0]
+    obs = inits[0].observability
     r, m0, sch, opt = logs[0].robot, meas[0], schedule, options
 
     # Measurements stacked over runs: (N, K, ...).
@@ -175,7 +177,7 @@ def run_ekf_many(logs: list[Log], schedule: Schedule = Schedule(), options: EKFO
                 x[:, 0], x[:, 1], x[:, 2] = pose[:, 0], pose[:, 1], wrap_angle(pose[:, 2])
                 t_now = t
             if switch_sigma is None and t_switch is not None and t >= t_switch:
-                switch_sigma = np.sqrt(np.diagonal(P, 0, 1, 2)[:, S.SCALE]).copy()
+                switch_sigma = P[:, _SCALE_IDX, _SCALE_IDX].copy()
                 holding = sch.hold is Hold.consider
             if code == WHEEL:
                 if switch_sigma is None and t_switch is not None:
@@ -200,8 +202,9 @@ def run_ekf_many(logs: list[Log], schedule: Schedule = Schedule(), options: EKFO
                         f"{opt.max_scale_error:.0%} from 1"))
                 out_t[row] = t
                 out_x[row] = x
-                out_var[row] = np.diagonal(P, 0, 1, 2)
-                out_pose[row] = P[:, 0:3, 0:3]
+                Pr = P if not obs.unobservable else decondition(P, obs, S.SCALE, obs.prior_sigma)  # as ekf.EKF
+                out_var[row] = np.diagonal(Pr, 0, 1, 2)
+                out_pose[row] = Pr[:, 0:3, 0:3]
                 row += 1
             elif code == GYRO:
                 h, H = gyro.yaw_rate(x[:, 4], x[:, 5])                               # eq. 10-11
@@ -249,5 +252,6 @@ def run_ekf_many(logs: list[Log], schedule: Schedule = Schedule(), options: EKFO
         nis_j = {c: list(zip(nis_t[c], nis_arr[c][:, j])) for c in nis_arr}
         out.append(make_estimate("ekf" if opt.slip_states else "ekf-no-slip", out_t, out_x[:, j], out_var[:, j],
                                  out_pose[:, j], nis_j, list(meas[j].notes) + [inits[j].note], wall, n_up,
-                                 t_switch, None if switch_sigma is None else switch_sigma[j], sch.hold))
+                                 t_switch, None if switch_sigma is None else switch_sigma[j], sch.hold,
+                                 P[j, _SCALE_IDX, _SCALE_IDX].copy(), inits[j]))
     return out

@@ -30,6 +30,7 @@ import numpy as np
 
 from factors import encoder, gps as gps_model, gyro, pose2, ranging
 from factors.motion import arc_at, transition_residual
+from odomgraph.estimators.initial import InitialState
 from odomgraph.estimators.keyframes import Keyframes
 from odomgraph.io.robot import RobotConfig
 
@@ -67,6 +68,8 @@ class Problem:
     speed_ref: np.ndarray | None = None
     """(3,) scale factors that define wheel-speed units for the random walks
     (see linearize; batch: the initial guess). None: plain walks."""
+    init: "InitialState | None" = None
+    """The initialisation the prior came from (its observability and warnings)."""
 
     @property
     def wheel_speed_units(self) -> bool:

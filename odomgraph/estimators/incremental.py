@@ -35,9 +35,10 @@ from factors import pose2, ranging
 from factors._math import wrap_angle
 from factors.motion import arc_at, propagate
 from odomgraph import state as St
+from odomgraph.checks import bounded
 from odomgraph.errors import EstimatorDivergedError
 from odomgraph.estimators.batch import (SmootherOptions, _factor_arrays, _n_measurements, build_problem,
-                                        keyframe_rows, marginal_blocks, retract)
+                                        honest_blocks, keyframe_rows, marginal_blocks, retract)
 from odomgraph.estimators.graph import NB, Problem, linearize
 from odomgraph.estimators.measurements import from_log
 from odomgraph.estimators.result import Estimate
@@ -54,12 +55,12 @@ S_IDX = [3, 4]
 
 @dataclass(frozen=True)
 class IncrementalOptions(SmootherOptions):
-    lag: float = 5.0
+    lag: float = bounded(5.0, gt=0)
     """Fixed-lag window [s] (fixed-lag only)."""
-    relinearize_threshold: float = 0.05
+    relinearize_threshold: float = bounded(0.05, gt=0)
     """ISAM2 relinearisation threshold of pose [m, rad] and velocity [m/s, rad/s]
     (built-in factors); bias, scale and slip thresholds are scaled from it."""
-    segment: float = 300.0
+    segment: float = bounded(300.0, ge=0)
     """isam2: length [s] of one ISAM2 instance's history (0: one ISAM2 for the
     whole log). GTSAM 4.3's Bayes-tree destructor walks the whole tree on every
     update (benchmarks/README.md), so one long-lived ISAM2 costs O(n) per
@@ -67,11 +68,11 @@ class IncrementalOptions(SmootherOptions):
     marginal of the boundary keyframe; at the end, every earlier segment
     receives what the later data says about its boundary, which recovers the
     full smoothed estimate. The online estimate is unchanged by this."""
-    relinearize_after: float = 2.0
+    relinearize_after: float = bounded(2.0, ge=0)
     """Age [s] at which an interval's linear factors are linearised again, at
     the by then nearly final estimate (they were first linearised at a
     prediction). 0 disables."""
-    max_mean_residual: float = 50.0
+    max_mean_residual: float = bounded(50.0, gt=0, infinite=True)
     """Diverged when the running mean (about the last 50) of the whitened squared
     post-fit residuals of GPS fixes or ranges exceeds this many times their
     dimension: the estimate no longer explains the data (as EKFOptions.max_mean_nis)."""
@@ -230,6 +231,8 @@ class _Runner:
         t0 = from_log(self.log).t_start
         est.t_switch = None if self.schedule.calibrate_until is None else t0 + self.schedule.calibrate_until
         est.update_times = self.update_times[1:]
+        est.observability = self.prob.init.observability
+        est.warnings = list(self.prob.init.warnings)
         return est
 
 
@@ -267,6 +270,18 @@ class _Runner:
                     f"{name} residuals is {e[0]:.0f} (expected about {e[2]}); its linear factors were linearised "
                     "too far from the answer (e.g. nominal parameters far off). The batch smoother "
                     "(--method batch) relinearises everything and may still work")
+
+
+def _joint_marginal(isam, k: int) -> np.ndarray:
+    """(11, 11) joint marginal covariance of (X_k, W_k, S_k) in an ISAM2, tangent order X, W, S."""
+    keys = [X_KEY(k), W_KEY(k), S_KEY(k)]
+    jm = isam.jointMarginalCovariance(keys)
+    off = np.cumsum((0, 3, 6, 2))
+    C = np.zeros((11, 11))
+    for a, ka in enumerate(keys):
+        for c, kc in enumerate(keys):
+            C[off[a]:off[a + 1], off[c]:off[c + 1]] = jm.at(ka, kc)
+    return 0.5 * (C + C.T)
 
 
 #: ISAM2 boundary tangent order (X 3, W_KEY 6, S_KEY 2) -> keyframe block order (graph.py).
@@ -364,19 +379,11 @@ class ISAM2Runner(_Runner):
     # -------------------------------------------------------- segmentation
     def _boundary(self, isam, b):
         """(values of X_b, W_b, S_b; their joint covariance (11, 11), tangent order X, W, S)."""
-        keys = [X_KEY(b), W_KEY(b), S_KEY(b)]
-        jm = isam.jointMarginalCovariance(keys)
-        dims = (3, 6, 2)
-        off = np.cumsum((0,) + dims)
-        C = np.zeros((11, 11))
-        for a, ka in enumerate(keys):
-            for c, kc in enumerate(keys):
-                C[off[a]:off[a + 1], off[c]:off[c + 1]] = jm.at(ka, kc)
         vals = gtsam.Values()
         vals.insert(X_KEY(b), isam.calculateEstimatePose2(X_KEY(b)))
         vals.insert(W_KEY(b), isam.calculateEstimateVector(W_KEY(b)))
         vals.insert(S_KEY(b), isam.calculateEstimateVector(S_KEY(b)))
-        return vals, 0.5 * (C + C.T)
+        return vals, _joint_marginal(isam, b)
 
     @staticmethod
     def _information_factor(vals, Lam, eta):
@@ -484,8 +491,12 @@ class ISAM2Runner(_Runner):
             inf_f = np.linalg.inv(cov_f)
             fin, cov_f = self._smooth_segment(i, inf_f - np.linalg.inv(seg["cov"]), inf_f @ delta)
         Sig = marginal_blocks(self.prob, self.pose, self.W)
+        given = Sig[-1][8:11, 8:11].copy()
+        Sig = honest_blocks(self.prob, Sig)
         est = keyframe_rows(self.prob, self.pose, self.W, Sig, "isam2")
         est.calibration_sigma = np.sqrt(np.diagonal(Sig[-1])[8:11])
+        est.calibration_cov = Sig[-1][8:11, 8:11].copy()
+        est.calibration_cov_given = given
         kf = self.prob.kf
         online = Estimate("isam2-online", kf.t[:-1] + 0.5 * kf.dt, self.online[1:], self.online_sigma[1:])
         est.online = online
@@ -514,11 +525,17 @@ class FixedLagRunner(_Runner):
     def _harvest(self, k, est):
         """Record keyframe k's fixed-lag estimate (from ``est``) and marginals before it leaves the window."""
         self._store(k, est)
-        Sig = np.zeros((NB, NB))
-        Sig[np.ix_(X_COLS, X_COLS)] = self.smoother.marginalCovariance(X_KEY(k))
-        Sig[np.ix_(W_COLS, W_COLS)] = self.smoother.marginalCovariance(W_KEY(k))
-        Sig[np.ix_(S_COLS, S_COLS)] = self.smoother.marginalCovariance(S_KEY(k))
-        self.Sig[k] = Sig
+        if self.prob.init.observability.unobservable:
+            # Pinned scale combinations: their correction (batch.honest_blocks)
+            # needs the pose-scale cross-covariance, which per-variable
+            # marginals leave out.
+            self.Sig[k] = _to_block(_joint_marginal(self.smoother.getISAM2(), k))
+        else:
+            Sig = np.zeros((NB, NB))
+            Sig[np.ix_(X_COLS, X_COLS)] = self.smoother.marginalCovariance(X_KEY(k))
+            Sig[np.ix_(W_COLS, W_COLS)] = self.smoother.marginalCovariance(W_KEY(k))
+            Sig[np.ix_(S_COLS, S_COLS)] = self.smoother.marginalCovariance(S_KEY(k))
+            self.Sig[k] = Sig
         self.done[k] = True
 
     def step(self, k, factors, values):
@@ -539,11 +556,15 @@ class FixedLagRunner(_Runner):
         est = self.smoother.calculateEstimate()
         for j in np.nonzero(~self.done)[0]:
             self._harvest(int(j), est)
+        given = self.Sig[-1][8:11, 8:11].copy()
+        self.Sig = honest_blocks(self.prob, self.Sig)
         est = keyframe_rows(self.prob, self.pose, self.W, self.Sig, "fixed-lag")
         # Window marginals are per variable: the cross-covariance of X, W and S
         # of one keyframe is not available, so pose sigma at the row time
         # ignores it (it is second order for the pose).
         est.calibration_sigma = np.sqrt(np.diagonal(self.Sig[-1])[8:11])
+        est.calibration_cov = self.Sig[-1][8:11, 8:11].copy()
+        est.calibration_cov_given = given
         est.notes = [f"fixed-lag: {self.prob.kf.n} keyframes at {self.options.keyframe_hz:g} Hz, lag "
                      f"{self.options.lag:g} s"]
         return est

@@ -9,7 +9,7 @@ the start time is used.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -17,6 +17,7 @@ from factors import encoder
 from factors._math import rot2, wrap_angle
 from odomgraph import state as S
 from odomgraph.estimators.measurements import Measurements
+from odomgraph.estimators.observability import Observability, prior_scale_cov, structure
 from odomgraph.io.robot import RobotConfig
 
 #: Most heading change between the two fixes for the chord to give a heading [rad].
@@ -32,8 +33,11 @@ class InitialState:
     x: np.ndarray
     """(11,) state."""
     P: np.ndarray
-    """(11, 11) covariance."""
+    """(11, 11) covariance. Its scale block pins what the log cannot determine
+    (observability.prior_scale_cov)."""
     note: str
+    observability: Observability = field(default_factory=Observability)
+    warnings: tuple[str, ...] = ()
 
 
 def _wheel_rates(robot: RobotConfig, meas: Measurements):
@@ -88,11 +92,11 @@ def initial_state(robot: RobotConfig, meas: Measurements) -> InitialState:
     pn = robot.process
     P[S.BIAS, S.BIAS] = pn.initial_bias_sigma**2
     P[S.SLIP_L, S.SLIP_L] = P[S.SLIP_R, S.SLIP_R] = pn.initial_slip_sigma**2
-    for i in S.SCALE:
-        P[i, i] = pn.initial_scale_sigma**2
+    obs = structure(robot, meas)
+    P[np.ix_(S.SCALE, S.SCALE)] = prior_scale_cov(obs, pn.initial_scale_sigma)
     tw, vw, ww = _wheel_rates(robot, meas)
 
-    def finish(t0, pose, pose_cov, note):
+    def finish(t0, pose, pose_cov, note, warnings=()):
         x[S.POSE] = pose
         x[S.THETA] = wrap_angle(pose[2])
         k = min(np.searchsorted(tw, t0), len(tw) - 1)
@@ -102,11 +106,11 @@ def initial_state(robot: RobotConfig, meas: Measurements) -> InitialState:
         P[S.V, S.V] = (0.2 + 0.1 * abs(vw[k])) ** 2
         P[S.OMEGA, S.OMEGA] = (0.2 + 0.1 * abs(ww[k])) ** 2
         P[np.ix_(S.POSE, S.POSE)] = pose_cov
-        return InitialState(float(t0), x, P, note)
+        return InitialState(float(t0), x, P, note, obs, tuple(warnings))
 
     if robot.initial is not None:
         i = robot.initial
-        t0 = min(tw[0], *(s[0][0] for s in (meas.gyro, meas.gps, meas.ranges, meas.velocity) if s is not None))
+        t0 = min([tw[0], *(s[0][0] for s in (meas.gyro, meas.gps, meas.ranges, meas.velocity) if s is not None)])
         return finish(t0, np.array([i.x, i.y, i.theta]), np.diag(np.square(i.sigma)),
                       "initial pose from robot.toml [initial]")
 
@@ -117,8 +121,9 @@ def initial_state(robot: RobotConfig, meas: Measurements) -> InitialState:
         fixes, source = _range_fixes(meas, robot), "multilateration of the first ranges"
     if fixes is None:
         t0 = tw[0]
-        return finish(t0, np.zeros(3), np.diag([1e-6, 1e-6, 1e-6]),
-                      "no absolute sensor and no [initial]: the world frame is the start pose")
+        msg = ("no absolute sensor and no [initial] pose in robot.toml: the start pose is taken as the origin, "
+               "heading 0 (positions are relative to it)")
+        return finish(t0, np.zeros(3), np.diag([1e-6, 1e-6, 1e-6]), msg, (msg,))
 
     ft, fp, fs, lever = fixes
     lever = np.asarray(lever, float)

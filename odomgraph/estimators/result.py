@@ -6,6 +6,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from odomgraph import state
+from odomgraph.estimators.observability import Observability
 
 
 @dataclass
@@ -37,7 +38,18 @@ class Estimate:
     t_switch: float | None = None
     """Absolute time the schedule switched from calibration to slip estimation."""
     calibration_sigma: np.ndarray | None = None
-    """(3,) honest 1-sigma of the final scale factors (see Schedule.Hold)."""
+    """(3,) 1-sigma of the final scale factors (see Schedule.Hold)."""
+    calibration_cov: np.ndarray | None = None
+    """(3, 3) their covariance, honest: pinned combinations carry their prior
+    uncertainty (observability.decondition); None: diag(calibration_sigma^2)."""
+    calibration_cov_given: np.ndarray | None = None
+    """(3, 3) the same conditional on the pinned combinations at nominal, as
+    the estimator solved it (None: equal to calibration_cov)."""
+    observability: "Observability | None" = None
+    """What the log determines about the scale factors (estimators.observability)."""
+    warnings: list[str] = field(default_factory=list)
+    """One line each: what the user must know to trust the result (unobservable
+    parameters, rejected measurements, a hit iteration cap, ...)."""
     notes: list[str] = field(default_factory=list)
     online: "Estimate | None" = None
     """For incremental smoothers: the causal estimate as it stood at each time."""
@@ -50,9 +62,41 @@ class Estimate:
         n = len(self.t)
         assert self.mean.shape == (n, state.N) and self.sigma.shape == (n, state.N)
 
-    @property
-    def calibration(self) -> dict[str, dict[str, float]]:
-        """Final scale factors with their 1-sigma."""
+    def scale_cov(self, given: bool = False) -> np.ndarray:
+        """(3, 3) covariance of the final scale factors: honest, or with
+        ``given`` conditional on the pinned combinations (see the fields)."""
+        if given and self.calibration_cov_given is not None:
+            return np.asarray(self.calibration_cov_given)
+        if self.calibration_cov is not None:
+            return np.asarray(self.calibration_cov)
         sig = self.calibration_sigma if self.calibration_sigma is not None else self.sigma[-1, state.SCALE]
-        return {name: {"value": float(self.mean[-1, i]), "sigma": float(s)}
+        return np.diag(np.square(sig))
+
+    def unobservable(self) -> dict[str, str]:
+        """Scale combinations the log does not determine, with the reason:
+        those pinned by the structure and those the data barely inform
+        (estimators.observability)."""
+        from odomgraph.estimators.observability import weakly_determined
+        obs = self.observability
+        if obs is None:
+            return {}
+        out = dict(obs.unobservable)
+        if obs.prior_sigma is not None:
+            out.update(weakly_determined(obs, self.scale_cov(given=True), obs.prior_sigma))
+        return out
+
+    @property
+    def calibration(self) -> dict[str, dict]:
+        """Final scale factors: value, honest 1-sigma, and whether the log
+        determines it (a scale factor touched by an unobservable combination
+        is not)."""
+        from odomgraph.estimators.observability import AFFECTS, WEAK_RATIO
+        undetermined = {p for name in self.unobservable() for p in AFFECTS[name]}
+        sig = np.sqrt(np.maximum(np.diagonal(self.scale_cov()), 0.0))
+        prior = self.observability.prior_sigma if self.observability is not None else None
+        # Observable: no undetermined combination touches it, and its honest
+        # sigma is well inside the prior's (a free common scale leaves the
+        # track as uncertain as the prior through their product).
+        return {name: {"value": float(self.mean[-1, i]), "sigma": float(s),
+                       "observable": bool(name not in undetermined and (prior is None or s <= WEAK_RATIO * prior))}
                 for name, i, s in zip(("scale_left", "scale_right", "scale_track"), state.SCALE, sig)}

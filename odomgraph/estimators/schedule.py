@@ -30,5 +30,14 @@ class Schedule:
     """Seconds after the log's first sample; 0 = slip only; None = no schedule."""
     hold: Hold = Hold.consider
 
+    def __post_init__(self):
+        import math
+        from odomgraph.errors import OptionError
+        c = self.calibrate_until
+        if c is not None and (isinstance(c, bool) or not isinstance(c, (int, float)) or not math.isfinite(c)
+                              or c < 0):
+            raise OptionError(f"calibrate_until (--calibrate-until) must be seconds >= 0 or None, got {c!r}")
+        object.__setattr__(self, "hold", Hold(self.hold))
+
     def calibrating(self, t_rel: float) -> bool:
         return self.calibrate_until is not None and t_rel < self.calibrate_until

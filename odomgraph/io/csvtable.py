@@ -1,12 +1,13 @@
 """Reading and writing the log CSV files with errors that name file and line.
 
 Format (LOG_FORMAT.md): comma separated, one header row, ``#`` starts a
-comment line. The parse is vectorised; only when it fails do we walk the rows
-to name the offending line, so an hour-long log still reads in well under a
-second.
+comment line, and the file may start with a UTF-8 byte-order mark. The parse
+is vectorised; only when it fails do we walk the rows to name the offending
+line, so an hour-long log still reads in well under a second.
 """
 from __future__ import annotations
 
+import codecs
 import io
 from pathlib import Path
 
@@ -15,24 +16,70 @@ import numpy as np
 from odomgraph.errors import LogFormatError
 
 
-def read_table(path: Path, required: tuple[str, ...], optional: tuple[str, ...] = (),
-               text_columns: tuple[str, ...] = ()) -> dict[str, np.ndarray]:
-    """Read a CSV with a header into {column: array}.
+def shown(value: str, limit: int = 40) -> str:
+    """``value`` as it can appear inside a one-line message: control and other
+    unprintable characters escaped (a stray carriage return must not split the
+    message), long values cut."""
+    s = value if value.isprintable() else value.encode("unicode_escape").decode("ascii")
+    return s if len(s) <= limit else s[:limit] + "..."
 
-    Numeric columns must be finite; ``t`` (if required) must strictly increase.
-    Columns in ``text_columns`` are returned as arrays of str. Unknown extra
-    columns are allowed and ignored. The arrays carry file line numbers in the
-    special key ``"_line"`` for later error messages.
+
+def read_text(path: Path | str) -> str:
+    """A text file as str: UTF-8, a leading byte-order mark dropped.
+
+    Raises LogFormatError when the file is missing or unreadable, and names
+    the line and column of the first byte that is not UTF-8.
     """
     path = Path(path)
-    if not path.is_file():
-        raise LogFormatError(path, "file is missing")
     try:
-        text = path.read_text(encoding="utf-8")
-    except UnicodeDecodeError:
-        raise LogFormatError(path, "is not UTF-8 text") from None
+        data = path.read_bytes()
+    except FileNotFoundError:
+        raise LogFormatError(path, "file is missing") from None
+    except IsADirectoryError:
+        raise LogFormatError(path, "is a directory, not a file") from None
+    except OSError as exc:
+        raise LogFormatError(path, f"cannot be read ({exc.strerror})") from None
+    if data.startswith(codecs.BOM_UTF8):
+        data = data[len(codecs.BOM_UTF8):]
+    try:
+        return data.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        line = data.count(b"\n", 0, exc.start) + 1
+        col = exc.start - (data.rfind(b"\n", 0, exc.start) + 1) + 1
+        raise LogFormatError(path, f"is not UTF-8 text (byte 0x{data[exc.start]:02x} at column {col})", line) from None
+
+
+def text_lines(text: str):
+    """(line number, line) pairs, numbered as an editor numbers them: only
+    newline ends a line (str.splitlines would also split at form feeds and
+    other separators, and then every later line number would be off)."""
+    for lineno, raw in enumerate(text.split("\n"), start=1):
+        yield lineno, raw.rstrip("\r")
+
+
+def header_of(path: Path | str) -> list[str]:
+    """The column names of a CSV's header row ([] when it has none)."""
+    for _, raw in text_lines(read_text(path)):
+        s = raw.strip()
+        if s and not s.startswith("#"):
+            return [c.strip() for c in s.split(",")]
+    return []
+
+
+def read_table(path: Path, required: tuple[str, ...], optional: tuple[str, ...] = (),
+               text_columns: tuple[str, ...] = (), equal_times: bool = False) -> dict[str, np.ndarray]:
+    """Read a CSV with a header into {column: array}.
+
+    Numeric columns must be finite; ``t`` (if required) must strictly increase,
+    or, with ``equal_times``, never decrease (ranges.csv: several beacons may
+    share a time stamp). Columns in ``text_columns`` are returned as arrays of
+    str. Unknown extra columns are allowed and ignored. The arrays carry file
+    line numbers in the special key ``"_line"`` for later error messages.
+    """
+    path = Path(path)
+    text = read_text(path)
     header, header_line, rows, lines = None, 0, [], []
-    for lineno, raw in enumerate(text.splitlines(), start=1):
+    for lineno, raw in text_lines(text):
         s = raw.strip()
         if not s or s.startswith("#"):
             continue
@@ -45,8 +92,8 @@ def read_table(path: Path, required: tuple[str, ...], optional: tuple[str, ...] 
         raise LogFormatError(path, "has no header row")
     missing = [c for c in required if c not in header]
     if missing:
-        raise LogFormatError(path, f"missing column(s) {', '.join(missing)} (header is '{','.join(header)}')",
-                             header_line)
+        raise LogFormatError(path, f"missing column(s) {', '.join(missing)} (header is "
+                                   f"'{shown(','.join(header), 80)}')", header_line)
     if len(set(header)) != len(header):
         raise LogFormatError(path, "duplicate column names in header", header_line)
     ncol = len(header)
@@ -74,19 +121,21 @@ def read_table(path: Path, required: tuple[str, ...], optional: tuple[str, ...] 
                 try:
                     float(v)
                 except ValueError:
-                    raise LogFormatError(path, f"column '{name}': '{v}' is not a number", ln) from None
+                    raise LogFormatError(path, f"column '{name}': '{shown(v)}' is not a number", ln) from None
             raise
         bad = ~np.isfinite(arr)
         if bad.any():
             k = int(np.argmax(bad))
-            raise LogFormatError(path, f"column '{name}': {col[k]} is not a finite number", lines[k])
+            raise LogFormatError(path, f"column '{name}': {shown(col[k])} is not a finite number", lines[k])
         out[name] = arr
     if "t" in out and len(out["t"]) > 1:
         dt = np.diff(out["t"])
-        if (dt <= 0).any():
-            k = int(np.argmax(dt <= 0)) + 1
-            raise LogFormatError(path, f"time does not increase (t = {out['t'][k]!r} after {out['t'][k - 1]!r})",
-                                 lines[k])
+        wrong = dt < 0 if equal_times else dt <= 0
+        if wrong.any():
+            k = int(np.argmax(wrong)) + 1
+            what = "decreases" if equal_times else "does not increase"
+            raise LogFormatError(path, f"time {what} (t = {float(out['t'][k]):.9g} after "
+                                       f"{float(out['t'][k - 1]):.9g})", lines[k])
     return out
 
 
@@ -117,4 +166,3 @@ def write_table(path: Path, columns: dict[str, np.ndarray], formats: dict[str, s
     for i in range(n):
         buf.write(",".join(c[i] for c in cols) + "\n")
     Path(path).write_text(buf.getvalue(), encoding="utf-8")
-

@@ -32,9 +32,10 @@ def tum_text(est: Estimate) -> str:
     return "".join(f"{r[0]:.6f} {r[1]:.6f} {r[2]:.6f} 0 0 0 {r[6]:.9f} {r[7]:.9f}\n" for r in rows)
 
 
-def write_estimate(est: Estimate, out_dir: Path | str, summary: dict) -> Path:
-    """Write ``est`` and its ``summary`` dict (see ``summary``) atomically."""
-    with atomic_output_dir(out_dir) as d:
+def write_estimate(est: Estimate, out_dir: Path | str, summary: dict, inputs=()) -> Path:
+    """Write ``est`` and its ``summary`` dict (see ``summary``) atomically.
+    ``inputs``: paths the output must not touch (io.outdir)."""
+    with atomic_output_dir(out_dir, inputs, kind="estimate") as d:
         write_states(d / "states.csv", est)
         (d / "trajectory.tum").write_text(tum_text(est), encoding="utf-8")
         if est.online is not None:

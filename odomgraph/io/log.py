@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from odomgraph.errors import LogFormatError
-from odomgraph.io.csvtable import read_table, write_table
+from odomgraph.io.csvtable import header_of, read_table, read_text, shown, write_table
 from odomgraph.io.geodesy import latlon_to_local
 from odomgraph.io.outdir import atomic_output_dir
 from odomgraph.io.robot import RobotConfig, load_robot, robot_toml
@@ -144,6 +144,9 @@ def read_log(directory: Path | str) -> Log:
         raise LogFormatError(d, "log directory does not exist")
     robot = load_robot(d / "robot.toml")
     enc = ws = gps = gyro = rng = vel = truth = None
+    if _optional(d / "encoders.csv") and _optional(d / "wheel_speeds.csv"):
+        raise LogFormatError(d, "has both encoders.csv and wheel_speeds.csv; they are alternatives "
+                                "(LOG_FORMAT.md): keep the one to use")
     if (p := _optional(d / "encoders.csv")):
         c = read_table(p, ("t", "ticks_left", "ticks_right"))
         if len(c["t"]) < 2:
@@ -151,8 +154,8 @@ def read_log(directory: Path | str) -> Log:
         enc = Encoders(c["t"], c["ticks_left"], c["ticks_right"])
     if (p := _optional(d / "wheel_speeds.csv")):
         c = read_table(p, ("t", "v_left", "v_right"))
-        if len(c["t"]) < 1:
-            raise LogFormatError(p, "has no data rows")
+        if len(c["t"]) < 2:
+            raise LogFormatError(p, "needs at least two rows")
         ws = WheelSpeeds(c["t"], c["v_left"], c["v_right"])
     if enc is None and ws is None:
         raise LogFormatError(d / "encoders.csv", "file is missing (a log needs encoders.csv or wheel_speeds.csv)")
@@ -162,13 +165,13 @@ def read_log(directory: Path | str) -> Log:
         c = read_table(p, ("t", "omega"))
         gyro = Gyro(c["t"], c["omega"])
     if (p := _optional(d / "ranges.csv")):
-        c = read_table(p, ("t", "beacon", "range"), text_columns=("beacon",))
+        c = read_table(p, ("t", "beacon", "range"), text_columns=("beacon",), equal_times=True)
         idx = np.empty(len(c["t"]), dtype=np.int64)
         known = {b.id: i for i, b in enumerate(robot.beacons)}
         for k, (b, ln) in enumerate(zip(c["beacon"], c["_line"])):
             if b not in known:
-                raise LogFormatError(p, f"unknown beacon '{b}' (robot.toml [range].beacons has "
-                                        f"{sorted(known) or 'none'})", int(ln))
+                raise LogFormatError(p, f"unknown beacon '{shown(b)}' (robot.toml [range].beacons has "
+                                        f"{shown(str(sorted(known)), 120) if known else 'none'})", int(ln))
             idx[k] = known[b]
         neg = c["range"] < 0
         if neg.any():
@@ -183,22 +186,92 @@ def read_log(directory: Path | str) -> Log:
     scales = None
     if (p := _optional(d / "truth.toml")):
         try:
-            tt = tomllib.loads(p.read_text(encoding="utf-8"))
+            tt = tomllib.loads(read_text(p))
         except tomllib.TOMLDecodeError as exc:
-            raise LogFormatError(p, f"malformed TOML: {exc}") from None
+            raise LogFormatError(p, f"malformed TOML: {shown(str(exc), 200)}") from None
         try:
             scales = tuple(float(tt[k]) for k in ("scale_left", "scale_right", "scale_track"))
         except KeyError as exc:
             raise LogFormatError(p, f"missing key {exc.args[0]}") from None
-        except (TypeError, ValueError):
+        except (TypeError, ValueError, OverflowError):
             raise LogFormatError(p, "scale factors must be numbers") from None
-    return Log(robot, enc, ws, gps, gyro, rng, vel, truth, scales, path=d)
+        if not all(np.isfinite(scales)) or min(scales) <= 0:
+            raise LogFormatError(p, f"scale factors must be positive finite numbers, got {list(scales)}")
+    log = Log(robot, enc, ws, gps, gyro, rng, vel, truth, scales, path=d)
+    check_clock(log)
+    return log
+
+
+#: A time stamp beyond this many seconds is not seconds (1e10 s after 1970 is the year 2286).
+MAX_ABS_TIME = 1e10
+#: Longest plausible log [s] (a year).
+MAX_DURATION = 3.2e7
+#: Longest plausible median wheel-odometry interval [s]: 5 s is 0.2 Hz.
+MAX_WHEEL_INTERVAL = 5.0
+
+_FILES = {"encoders": "encoders.csv", "wheel_speeds": "wheel_speeds.csv", "gps": "gps.csv", "gyro": "gyro.csv",
+          "ranges": "ranges.csv", "velocity": "velocity.csv", "truth": "truth.csv"}
+
+
+def _unit_guess(value: float, lo: float, hi: float) -> str:
+    """Which unit turns ``value`` into [lo, hi] seconds, in words ('' if none)."""
+    for unit, f in (("milliseconds", 1e3), ("microseconds", 1e6), ("nanoseconds", 1e9)):
+        if lo <= value / f <= hi:
+            return f"; it looks like {unit}"
+    return ""
+
+
+def check_clock(log: Log) -> None:
+    """Refuse time stamps that cannot be seconds on one shared clock (LOG_FORMAT.md).
+
+    Milliseconds or nanoseconds pass every per-file check (they increase), and
+    then give plausible-looking nonsense: a track scale of 0.0015, or an
+    allocation of hundreds of GiB. Checks, each naming the likely unit:
+    absolute stamps beyond MAX_ABS_TIME, a log longer than MAX_DURATION, a
+    median wheel interval beyond MAX_WHEEL_INTERVAL, and a sensor file whose
+    times do not overlap the wheels' (a different clock).
+    """
+    d = log.path or Path(".")
+    spans = {}
+    for key, name in _FILES.items():
+        obj = getattr(log, key)
+        if obj is None or len(obj.t) == 0:
+            continue
+        t = obj.t
+        big = np.abs(t) > MAX_ABS_TIME
+        if big.any():
+            v = float(t[np.argmax(big)])
+            raise LogFormatError(d / name, f"time stamp {v:.4g} is not seconds{_unit_guess(abs(v), 1e8, 1e10)} "
+                                           "(LOG_FORMAT.md: t is in seconds)")
+        spans[key] = (float(t[0]), float(t[-1]))
+        if t[-1] - t[0] > MAX_DURATION:
+            raise LogFormatError(d / name, f"spans {t[-1] - t[0]:.4g} s, more than a year: the time stamps are "
+                                           f"not seconds{_unit_guess(t[-1] - t[0], 1.0, MAX_DURATION)}")
+    wheel = "encoders" if log.encoders is not None else "wheel_speeds"
+    wt = getattr(log, wheel).t
+    if len(wt) > 1:
+        med = float(np.median(np.diff(wt)))
+        if med > MAX_WHEEL_INTERVAL:
+            raise LogFormatError(d / _FILES[wheel], f"median sample interval is {med:.4g} s, implausible for "
+                                                   f"wheel odometry{_unit_guess(med, 1e-4, MAX_WHEEL_INTERVAL)} "
+                                                   "(LOG_FORMAT.md: t is in seconds)")
+    if wheel not in spans:
+        return
+    w0, w1 = spans[wheel]
+    for key, (s0, s1) in spans.items():
+        if key == wheel:
+            continue
+        if s1 < w0 or s0 > w1:
+            raise LogFormatError(d / _FILES[key], f"its times ({s0:.6g} to {s1:.6g} s) do not overlap the wheel "
+                                                  f"odometry's ({w0:.6g} to {w1:.6g} s): the files of a log share "
+                                                  "one clock")
+        if s1 - s0 > 10 * (w1 - w0) + 60:
+            raise LogFormatError(d / _FILES[key], f"spans {s1 - s0:.4g} s, the wheel odometry only {w1 - w0:.4g} s: "
+                                                  "the files of a log share one clock and unit (seconds)")
 
 
 def _read_gps(p: Path, robot: RobotConfig) -> Gps:
-    with p.open(encoding="utf-8") as fh:
-        header = next((ln for ln in fh if ln.strip() and not ln.lstrip().startswith("#")), "")
-    cols = [c.strip() for c in header.split(",")]
+    cols = header_of(p)
     if "lat" in cols or "lon" in cols:
         c = read_table(p, ("t", "lat", "lon"), optional=("sigma",))
         if len(c["t"]) == 0:
@@ -217,9 +290,10 @@ def _read_gps(p: Path, robot: RobotConfig) -> Gps:
     return Gps(c["t"], x, y, sigma)
 
 
-def write_log(log: Log, directory: Path | str) -> Path:
-    """Write ``log`` as a log directory (atomically). Returns the path."""
-    with atomic_output_dir(directory) as d:
+def write_log(log: Log, directory: Path | str, inputs=()) -> Path:
+    """Write ``log`` as a log directory (atomically; ``inputs`` are paths the
+    output must not touch, see io.outdir). Returns the path."""
+    with atomic_output_dir(directory, inputs, kind="log") as d:
         (d / "robot.toml").write_text(robot_toml(log.robot), encoding="utf-8")
         if log.encoders is not None:
             e = log.encoders

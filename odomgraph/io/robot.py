@@ -7,11 +7,14 @@ optional table ``[process]`` holds the estimators' process noise (the paper's
 from __future__ import annotations
 
 import math
+import json
 import tomllib
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
-from odomgraph.errors import LogFormatError
+from odomgraph.checks import bounded, check_fields, field_ranges, unknown_names, value_problem, value_text
+from odomgraph.errors import LogFormatError, OptionError
+from odomgraph.io.csvtable import read_text, shown
 
 
 @dataclass(frozen=True)
@@ -39,18 +42,20 @@ class ProcessNoise:
     """Continuous-time random-walk intensities, as 1-sigma growth per sqrt(second).
 
     A state with intensity q grows its variance by q^2 dt over dt seconds.
+    Every intensity and sigma must be positive (a zero one makes the
+    covariance singular); only ``scale`` may be 0.
     """
 
-    accel: float = 0.2
+    accel: float = bounded(0.2, gt=0)
     """Forward acceleration noise driving v [m/s^2 /sqrt(Hz), i.e. (m/s)/sqrt(s)]."""
-    yaw_accel: float = 0.3
+    yaw_accel: float = bounded(0.3, gt=0)
     """Angular acceleration noise driving omega [(rad/s)/sqrt(s)]."""
-    slip: float = 0.05
+    slip: float = bounded(0.05, gt=0)
     """Common-mode slip random walk, of (slip_left + slip_right)/2 [(m/s)/sqrt(s)].
 
     Common-mode slip trades off against v and is seen only through absolute
     sensors, so a large intensity only adds noise."""
-    slip_differential: float | None = None
+    slip_differential: float | None = bounded(None, gt=0, optional=True)
     """Differential slip random walk, of slip_right - slip_left [(m/s)/sqrt(s)].
 
     None picks by the log: 1.0 when it has a yaw-rate sensor (gyro or velocity
@@ -58,20 +63,23 @@ class ProcessNoise:
     can follow a wheel that starts spinning within a few updates; 0.02 when it
     has none, because then a differential slip looks exactly like a turn and a
     large intensity lets the filter trade heading for slip."""
-    gyro_bias: float = 1e-3
+    gyro_bias: float = bounded(1e-3, gt=0)
     """Gyro bias random walk [(rad/s)/sqrt(s)]."""
-    scale: float = 0.0
+    scale: float = bounded(0.0, ge=0)
     """Scale-factor random walk [1/sqrt(s)]; 0: constants, as in the paper."""
-    initial_scale_sigma: float = 0.05
+    initial_scale_sigma: float = bounded(0.05, gt=0)
     """Prior 1-sigma of each scale factor about 1 [-]."""
-    initial_slip_sigma: float = 0.1
+    initial_slip_sigma: float = bounded(0.1, gt=0)
     """Prior 1-sigma of each slip [m/s]."""
-    initial_bias_sigma: float = 0.05
+    initial_bias_sigma: float = bounded(0.05, gt=0)
     """Prior 1-sigma of the gyro bias [rad/s]."""
-    pseudo_slip_sigma: float = 1e-3
+    pseudo_slip_sigma: float = bounded(1e-3, gt=0)
     """1-sigma of the zero-slip pseudo-measurement (paper eq. 35-36) [m/s]."""
-    pseudo_scale_sigma: float = 1e-4
+    pseudo_scale_sigma: float = bounded(1e-4, gt=0)
     """1-sigma of the hold-scale pseudo-measurement (paper eq. 37-38) [-]."""
+
+    def __post_init__(self):
+        check_fields(self)
 
 
 @dataclass(frozen=True)
@@ -101,6 +109,21 @@ class RobotConfig:
     initial: InitialPose | None = None
     process: ProcessNoise = field(default_factory=ProcessNoise)
 
+    def __post_init__(self):
+        # The same ranges as robot.toml's SCHEMA, for configs built in code
+        # (importers, the simulator): a bad one fails here, not deep in an estimator.
+        for name in ("ticks_per_meter_left", "ticks_per_meter_right", "track_width", "gps_sigma", "gyro_sigma",
+                     "range_sigma"):
+            problem = value_problem(getattr(self, name), {"gt": 0})
+            if problem:
+                raise OptionError(f"RobotConfig.{name} {problem}, got {value_text(getattr(self, name))}")
+        if not (self.encoder_sigma[0] > 0 and self.encoder_sigma[1] >= 0):
+            raise OptionError(f"RobotConfig.encoder_sigma must be (a > 0, b >= 0), got {self.encoder_sigma}")
+        if not all(v > 0 for v in self.velocity_sigma):
+            raise OptionError(f"RobotConfig.velocity_sigma must be positive, got {self.velocity_sigma}")
+        if self.initial is not None and not all(v > 0 for v in self.initial.sigma):
+            raise OptionError(f"RobotConfig.initial.sigma must be positive, got {self.initial.sigma}")
+
     def beacon_index(self, beacon_id: str) -> int | None:
         for i, b in enumerate(self.beacons):
             if b.id == beacon_id:
@@ -112,104 +135,176 @@ class RobotConfig:
 
 
 # ----------------------------------------------------------------- reading
+def _number(gt=None, ge=None, required=False):
+    return {"kind": "number", "range": {"gt": gt, "ge": ge}, "required": required}
+
+
+def _vector(n, gt=None, ge=None):
+    return {"kind": "vector", "n": n, "range": {"gt": gt, "ge": ge}}
+
+
+#: robot.toml, table by table: every key a reader accepts and its range.
+#: ``[calibration]`` is the record ``calibrate`` writes; readers ignore it.
+SCHEMA: dict[str, dict | None] = {
+    "wheels": {"ticks_per_meter_left": _number(gt=0, required=True),
+               "ticks_per_meter_right": _number(gt=0, required=True),
+               "track_width": _number(gt=0, required=True)},
+    "encoders": {"sigma": _vector(2, ge=0)},
+    "gps": {"lever_arm": _vector(2), "sigma": _number(gt=0), "origin": _vector((2, 3))},
+    "gyro": {"sigma": _number(gt=0)},
+    "range": {"sigma": _number(gt=0), "lever_arm": _vector(2), "beacons": {"kind": "beacons"}},
+    "velocity": {"sigma": _vector(2, gt=0)},
+    "initial": {"x": _number(required=True), "y": _number(required=True), "theta": _number(required=True),
+                "sigma": _vector(3, gt=0)},
+    "process": {name: {"kind": "number", "range": meta, "required": False}
+                for name, meta in field_ranges(ProcessNoise).items()},
+    "calibration": None,
+}
+
+
 class _Reader:
-    """Typed access to a parsed TOML table with errors that name the key."""
+    """Typed access to a parsed robot.toml, checked against SCHEMA, with errors
+    that name the key and, where it can be found, its line."""
 
-    def __init__(self, path: Path, data: dict):
-        self.path, self.data = path, data
+    def __init__(self, path: Path, data: dict, text: str):
+        self.path, self.data, self.text = path, data, text
 
-    def _fail(self, key: str, problem: str):
-        raise LogFormatError(self.path, f"[{key}] {problem}")
+    def _line(self, table: str, key: str | None = None) -> int | None:
+        """Line of ``key`` inside ``[table]`` (or of the table header), if it can be found."""
+        import re
+        current = ""
+        for lineno, raw in enumerate(self.text.split("\n"), start=1):
+            s = raw.strip()
+            m = re.match(r"^\[\s*([^\]]+?)\s*\]", s)
+            if m and not s.startswith("[["):
+                current = m.group(1)
+                if key is None and current == table:
+                    return lineno
+                continue
+            if key is not None and current == table and re.match(rf"^[\"']?{re.escape(key)}[\"']?\s*=", s):
+                return lineno
+        return None
+
+    def fail(self, table: str, key: str | None, problem: str):
+        where = f"[{table}.{key}]" if key and table else (f"[{table}]" if table else f"'{key}'")
+        raise LogFormatError(self.path, f"{where} {problem}", self._line(table, key))
+
+    def check_keys(self) -> None:
+        """Unknown tables and keys are errors (a typo would otherwise be ignored)."""
+        for name, body in self.data.items():
+            if name not in SCHEMA:
+                if not isinstance(body, dict):
+                    tables = [t for t, keys in SCHEMA.items() if keys and name in keys]
+                    hint = f" (it belongs in [{tables[0]}])" if tables else ""
+                    raise LogFormatError(self.path, f"unknown top-level key '{shown(name)}'{hint}",
+                                         self._line("", name))
+                msg = unknown_names([name], SCHEMA, "table")
+                raise LogFormatError(self.path, f"{shown(msg)}", self._line(name))
+            keys = SCHEMA[name]
+            if keys is None:
+                continue
+            if not isinstance(body, dict):
+                self.fail(name, None, "must be a table")
+            msg = unknown_names(list(body), keys, f"key in [{name}]")
+            if msg:
+                bad = next(k for k in body if k not in keys)
+                raise LogFormatError(self.path, shown(msg, 200), self._line(name, bad))
 
     def table(self, name: str) -> dict:
-        t = self.data.get(name, {})
-        if not isinstance(t, dict):
-            self._fail(name, "must be a table")
-        return t
+        return self.data.get(name, {})
 
-    def number(self, table: str, key: str, default=None, positive=False, required=False) -> float:
+    def get(self, table: str, key: str, default=None):
+        spec = SCHEMA[table][key]
         t = self.table(table)
         if key not in t:
-            if required:
-                self._fail(f"{table}.{key}" if table else key, "is missing")
+            if spec.get("required"):
+                self.fail(table, key, "is missing")
             return default
         val = t[key]
-        if isinstance(val, bool) or not isinstance(val, (int, float)) or not math.isfinite(val):
-            self._fail(f"{table}.{key}", f"must be a finite number, got {val!r}")
-        if positive and val <= 0:
-            self._fail(f"{table}.{key}", f"must be positive, got {val!r}")
-        return float(val)
-
-    def vector(self, table: str, key: str, n: int, default=None, nonneg=False) -> tuple | None:
-        t = self.table(table)
-        if key not in t:
-            return default
-        val = t[key]
-        if (not isinstance(val, list) or len(val) != n or
+        if spec["kind"] == "number":
+            problem = value_problem(val, spec["range"])
+            if problem:
+                self.fail(table, key, f"{problem}, got {shown(repr(val))}")
+            return float(val)
+        sizes = spec["n"] if isinstance(spec["n"], tuple) else (spec["n"],)
+        if (not isinstance(val, list) or len(val) not in sizes or
                 any(isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) for v in val)):
-            self._fail(f"{table}.{key}", f"must be a list of {n} finite numbers, got {val!r}")
-        if nonneg and any(v < 0 for v in val):
-            self._fail(f"{table}.{key}", f"must not be negative, got {val!r}")
+            n = " or ".join(map(str, sizes))
+            self.fail(table, key, f"must be a list of {n} finite numbers, got {shown(repr(val))}")
+        for v in val:
+            problem = value_problem(v, spec["range"])
+            if problem:
+                self.fail(table, key, f"entries {problem}, got {shown(repr(val))}")
         return tuple(float(v) for v in val)
+
+    def beacons(self) -> tuple[Beacon, ...]:
+        raw = self.table("range").get("beacons", [])
+        if not isinstance(raw, list):
+            self.fail("range", "beacons", "must be a list of { id, x, y } tables")
+        out = []
+        for i, b in enumerate(raw):
+            if not isinstance(b, dict) or "id" not in b:
+                self.fail("range", "beacons", f"entry {i + 1} must be a table with id, x, y")
+            msg = unknown_names(list(b), ("id", "x", "y"), f"key in beacon {i + 1}")
+            if msg:
+                self.fail("range", "beacons", shown(msg, 200))
+            if not isinstance(b["id"], (str, int)) or isinstance(b["id"], bool) or str(b["id"]).strip() == "":
+                self.fail("range", "beacons", f"entry {i + 1}: id must be a non-empty string or an integer")
+            xy = []
+            for c in ("x", "y"):
+                if c not in b:
+                    self.fail("range", "beacons", f"entry {i + 1} has no {c}")
+                problem = value_problem(b[c], {})
+                if problem:
+                    self.fail("range", "beacons", f"entry {i + 1}: {c} {problem}")
+                xy.append(float(b[c]))
+            out.append(Beacon(str(b["id"]), *xy))
+        ids = [b.id for b in out]
+        if len(set(ids)) != len(ids):
+            self.fail("range", "beacons", f"beacon ids must be unique, got {ids}")
+        return tuple(out)
 
 
 def load_robot(path: Path | str) -> RobotConfig:
-    """Parse and validate robot.toml. Raises LogFormatError naming file and key/line."""
+    """Parse and validate robot.toml. Raises LogFormatError naming file, key and line.
+
+    Every key is checked against SCHEMA: unknown tables and keys are errors,
+    with the nearest valid name suggested."""
     path = Path(path)
-    if not path.is_file():
+    if not path.is_file() and not path.exists():
         raise LogFormatError(path, "file is missing (every log needs robot.toml)")
+    text = read_text(path)
     try:
-        data = tomllib.loads(path.read_text(encoding="utf-8"))
+        data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         # tomllib's message already carries "(at line N, column M)".
-        raise LogFormatError(path, f"malformed TOML: {exc}") from None
-    except UnicodeDecodeError:
-        raise LogFormatError(path, "is not UTF-8 text") from None
-    r = _Reader(path, data)
-    beacons = []
-    raw_beacons = r.table("range").get("beacons", [])
-    if not isinstance(raw_beacons, list):
-        r._fail("range.beacons", "must be a list of { id, x, y } tables")
-    for i, b in enumerate(raw_beacons):
-        if not isinstance(b, dict) or "id" not in b:
-            r._fail(f"range.beacons[{i}]", "must be a table with id, x, y")
-        sub = _Reader(path, {"b": b})
-        bx = sub.number("b", "x", required=True)
-        by = sub.number("b", "y", required=True)
-        beacons.append(Beacon(str(b["id"]), bx, by))
-    ids = [b.id for b in beacons]
-    if len(set(ids)) != len(ids):
-        r._fail("range.beacons", f"beacon ids must be unique, got {ids}")
-
+        raise LogFormatError(path, f"malformed TOML: {shown(str(exc), 200)}") from None
+    r = _Reader(path, data, text)
+    r.check_keys()
+    beacons = r.beacons()
     initial = None
     if "initial" in data:
-        initial = InitialPose(
-            r.number("initial", "x", required=True),
-            r.number("initial", "y", required=True),
-            r.number("initial", "theta", required=True),
-            r.vector("initial", "sigma", 3, default=(1.0, 1.0, 0.5), nonneg=True),
-        )
+        initial = InitialPose(r.get("initial", "x"), r.get("initial", "y"), r.get("initial", "theta"),
+                              r.get("initial", "sigma", default=(1.0, 1.0, 0.5)))
     pdef = ProcessNoise()
-    process = ProcessNoise(**{
-        k: r.number("process", k, default=getattr(pdef, k)) for k in pdef.__dataclass_fields__
-    })
-    origin = r.vector("gps", "origin", 2, default=None)
-    if origin is None:
-        origin3 = r.vector("gps", "origin", 3, default=None)
-        origin = origin3[:2] if origin3 else None
+    process = ProcessNoise(**{k: r.get("process", k, default=getattr(pdef, k)) for k in pdef.__dataclass_fields__})
+    origin = r.get("gps", "origin")
+    enc = r.get("encoders", "sigma", default=(0.005, 0.01))
+    if enc[0] <= 0:
+        r.fail("encoders", "sigma", f"needs a positive constant part a (sigma = a + b|v|), got {list(enc)}")
     return RobotConfig(
-        ticks_per_meter_left=r.number("wheels", "ticks_per_meter_left", positive=True, required=True),
-        ticks_per_meter_right=r.number("wheels", "ticks_per_meter_right", positive=True, required=True),
-        track_width=r.number("wheels", "track_width", positive=True, required=True),
-        encoder_sigma=r.vector("encoders", "sigma", 2, default=(0.005, 0.01), nonneg=True),
-        gps_lever_arm=r.vector("gps", "lever_arm", 2, default=(0.0, 0.0)),
-        gps_sigma=r.number("gps", "sigma", default=0.05, positive=True),
-        gps_origin=origin,
-        gyro_sigma=r.number("gyro", "sigma", default=0.01, positive=True),
-        range_sigma=r.number("range", "sigma", default=0.05, positive=True),
-        range_lever_arm=r.vector("range", "lever_arm", 2, default=(0.0, 0.0)),
-        beacons=tuple(beacons),
-        velocity_sigma=r.vector("velocity", "sigma", 2, default=(0.05, 0.02), nonneg=True),
+        ticks_per_meter_left=r.get("wheels", "ticks_per_meter_left"),
+        ticks_per_meter_right=r.get("wheels", "ticks_per_meter_right"),
+        track_width=r.get("wheels", "track_width"),
+        encoder_sigma=enc,
+        gps_lever_arm=r.get("gps", "lever_arm", default=(0.0, 0.0)),
+        gps_sigma=r.get("gps", "sigma", default=0.05),
+        gps_origin=origin[:2] if origin else None,
+        gyro_sigma=r.get("gyro", "sigma", default=0.01),
+        range_sigma=r.get("range", "sigma", default=0.05),
+        range_lever_arm=r.get("range", "lever_arm", default=(0.0, 0.0)),
+        beacons=beacons,
+        velocity_sigma=r.get("velocity", "sigma", default=(0.05, 0.02)),
         initial=initial,
         process=process,
     )
@@ -217,8 +312,12 @@ def load_robot(path: Path | str) -> RobotConfig:
 
 # ----------------------------------------------------------------- writing
 def _fmt(v) -> str:
+    if isinstance(v, bool):
+        return "true" if v else "false"
     if isinstance(v, str):
-        return '"' + v.replace("\\", "\\\\").replace('"', '\\"') + '"'
+        # A JSON string is a valid TOML basic string: quotes, backslashes,
+        # newlines and control characters come out escaped.
+        return json.dumps(v, ensure_ascii=False).replace("\x7f", "\\u007f")
     if isinstance(v, (tuple, list)):
         return "[" + ", ".join(_fmt(x) for x in v) + "]"
     if isinstance(v, dict):

@@ -40,6 +40,19 @@ class SlipEvent:
     ramp: float = 0.3
     """Rise and fall time [s]; real slip builds up over a fraction of a second."""
 
+    def __post_init__(self):
+        import math
+        from odomgraph.errors import OptionError
+        if self.wheel not in ("left", "right"):
+            raise OptionError(f"slip event: wheel must be 'left' or 'right', got {self.wheel!r}")
+        if not all(math.isfinite(v) for v in (self.start, self.end, self.speed, self.ramp)):
+            raise OptionError("slip event: start, end, speed and ramp must be finite numbers")
+        if self.end < self.start or self.start < 0 or self.ramp < 0:
+            raise OptionError(f"slip event: needs 0 <= start <= end and ramp >= 0, got start {self.start:g} s, "
+                              f"end {self.end:g} s, ramp {self.ramp:g} s")
+        if abs(self.speed) > 20:
+            raise OptionError(f"slip event: |speed| must be at most 20 m/s, got {self.speed:g}")
+
 
 @dataclass(frozen=True)
 class Rates:
