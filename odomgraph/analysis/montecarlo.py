@@ -237,22 +237,54 @@ def run_study(spec: StudySpec, directory, workers: int | None = None, scheduler:
     return [done[p.key] for p in spec.points()]
 
 
+def _worker_init(parent: int) -> None:
+    """Set up a local worker: it leaves Ctrl-C and SIGTERM to the parent (which
+    terminates the pool), and exits by itself when the parent is gone, even
+    after a SIGKILL that gave the parent no chance to clean up."""
+    import signal
+    import threading
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)
+    try:   # Linux: the kernel sends SIGTERM when the parent dies
+        import ctypes
+        ctypes.CDLL(None, use_errno=True).prctl(1, signal.SIGTERM)   # PR_SET_PDEATHSIG
+    except (OSError, AttributeError):
+        pass
+
+    def watch():
+        import time
+        while os.getppid() == parent:
+            time.sleep(1.0)
+        os._exit(1)
+    threading.Thread(target=watch, daemon=True).start()
+    if os.getppid() != parent:      # died before the watch started
+        os._exit(1)
+
+
 def _run_local(todo, workers, finished):
-    from concurrent.futures import ProcessPoolExecutor, as_completed
+    import multiprocessing as mp
     workers = workers or os.cpu_count() or 1
     if workers <= 1:
         for p in todo:
             finished(p, run_point(p))
         return
-    with ProcessPoolExecutor(min(workers, len(todo))) as pool:
-        futures = {pool.submit(run_point, p): p for p in todo}
-        try:
-            for f in as_completed(futures):
-                finished(futures[f], f.result())
-        except BaseException:
-            for f in futures:
-                f.cancel()
-            raise
+    pool = mp.get_context("fork").Pool(min(workers, len(todo)), initializer=_worker_init, initargs=(os.getpid(),))
+    try:
+        for p, r in pool.imap_unordered(_run_indexed, list(enumerate(todo))):
+            finished(todo[p], r)
+        pool.close()
+    except BaseException:
+        # Ctrl-C, SIGTERM (raised as KeyboardInterrupt by the CLI) or a failed
+        # point: stop the workers now instead of waiting for their points.
+        pool.terminate()
+        raise
+    finally:
+        pool.join()
+
+
+def _run_indexed(item):
+    i, p = item
+    return i, run_point(p)
 
 
 def _run_dask(todo, scheduler, client, finished):

@@ -82,7 +82,9 @@ def build_problem(log: Log, schedule: Schedule, options: SmootherOptions, causal
     mean[0:3] = p
     cov = init.P.copy()
     mid = 0.5 * (kf.t[1:] + kf.t[:-1])
-    if schedule.calibrate_until is None:
+    if not init.observability.slip_observable:
+        zero = np.ones(kf.n - 1, bool)           # nothing but the wheels sees the motion: no slip
+    elif schedule.calibrate_until is None:
         zero = np.zeros(kf.n - 1, bool)
     else:
         zero = mid < meas.t_start + schedule.calibrate_until

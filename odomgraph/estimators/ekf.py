@@ -239,7 +239,7 @@ class EKF:
                 self.holding_scale = sch.hold is Hold.consider
             x = self.x
             if code == WHEEL:
-                if switch_sigma is None and t_switch is not None:
+                if (switch_sigma is None and t_switch is not None) or not obs.slip_observable:
                     h, H = pseudo.zero_slip(x[6], x[7])                              # eq. 35-36
                     self.update(np.zeros(2), h, H, _SLIP_IDX, self._R_slip)
                 elif switch_sigma is not None and sch.hold is Hold.pseudo:

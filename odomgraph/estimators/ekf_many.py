@@ -180,7 +180,7 @@ def run_ekf_many(logs: list[Log], schedule: Schedule = Schedule(), options: EKFO
                 switch_sigma = P[:, _SCALE_IDX, _SCALE_IDX].copy()
                 holding = sch.hold is Hold.consider
             if code == WHEEL:
-                if switch_sigma is None and t_switch is not None:
+                if (switch_sigma is None and t_switch is not None) or not obs.slip_observable:   # as ekf.EKF
                     h, H = pseudo.zero_slip(x[:, 6], x[:, 7])                        # eq. 35-36
                     update(np.zeros((n, 2)), h, H, _SLIP_IDX, R_slip)
                 elif switch_sigma is not None and sch.hold is Hold.pseudo:

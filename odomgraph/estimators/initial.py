@@ -93,6 +93,9 @@ def initial_state(robot: RobotConfig, meas: Measurements) -> InitialState:
     P[S.BIAS, S.BIAS] = pn.initial_bias_sigma**2
     P[S.SLIP_L, S.SLIP_L] = P[S.SLIP_R, S.SLIP_R] = pn.initial_slip_sigma**2
     obs = structure(robot, meas)
+    extra = () if obs.slip_observable else (
+        "slip is not observable: nothing but the wheels sees the motion (no gyro, velocity sensor or absolute "
+        "fixes), so it is taken as zero throughout (plain dead reckoning)",)
     P[np.ix_(S.SCALE, S.SCALE)] = prior_scale_cov(obs, pn.initial_scale_sigma)
     tw, vw, ww = _wheel_rates(robot, meas)
 
@@ -106,7 +109,7 @@ def initial_state(robot: RobotConfig, meas: Measurements) -> InitialState:
         P[S.V, S.V] = (0.2 + 0.1 * abs(vw[k])) ** 2
         P[S.OMEGA, S.OMEGA] = (0.2 + 0.1 * abs(ww[k])) ** 2
         P[np.ix_(S.POSE, S.POSE)] = pose_cov
-        return InitialState(float(t0), x, P, note, obs, tuple(warnings))
+        return InitialState(float(t0), x, P, note, obs, tuple(warnings) + extra)
 
     if robot.initial is not None:
         i = robot.initial

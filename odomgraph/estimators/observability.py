@@ -59,6 +59,11 @@ class Observability:
     """Total turning the wheels report [rad]."""
     prior_sigma: float | None = None
     """Prior 1-sigma of each scale factor [-] (ProcessNoise.initial_scale_sigma)."""
+    slip_observable: bool = True
+    """False when nothing but the wheels sees the motion (no gyro, velocity
+    sensor or absolute fixes): slip is then indistinguishable from motion, and
+    the estimators take it as zero throughout (the paper's zero-slip
+    pseudo-update over the whole log) instead of letting it soak up the path."""
 
     def pinned(self, name: str) -> bool:
         return name in self.unobservable
@@ -108,7 +113,8 @@ def structure(robot, meas) -> Observability:
         out["scale_track"] = "no yaw-rate or heading reference (gyro, velocity sensor or absolute fixes)"
     elif rotation < MIN_ROTATION:
         out["scale_track"] = f"the robot turned only {rotation:.2g} rad in all: the track is not observable"
-    return Observability(out, travel, rotation, robot.process.initial_scale_sigma)
+    return Observability(out, travel, rotation, robot.process.initial_scale_sigma,
+                         slip_observable=bool(yaw_ref or velocity))
 
 
 def pinned_basis(obs: Observability) -> np.ndarray:

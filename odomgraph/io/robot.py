@@ -199,7 +199,7 @@ class _Reader:
                     raise LogFormatError(self.path, f"unknown top-level key '{shown(name)}'{hint}",
                                          self._line("", name))
                 msg = unknown_names([name], SCHEMA, "table")
-                raise LogFormatError(self.path, f"{shown(msg)}", self._line(name))
+                raise LogFormatError(self.path, shown(msg, 200), self._line(name))
             keys = SCHEMA[name]
             if keys is None:
                 continue

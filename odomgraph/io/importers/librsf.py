@@ -17,28 +17,27 @@ from pathlib import Path
 import numpy as np
 
 from odomgraph.errors import LogFormatError
+from odomgraph.io.csvtable import read_text, shown, text_lines
 from odomgraph.io.log import Log, Ranges, Truth, WheelSpeeds
 from odomgraph.io.robot import Beacon, RobotConfig
 
 
 def _lines(path: Path):
-    if not path.is_file():
-        raise LogFormatError(path, "file is missing")
-    for lineno, raw in enumerate(path.read_text(encoding="utf-8").splitlines(), start=1):
+    for lineno, raw in text_lines(read_text(path)):
         parts = raw.split()
-        if parts:
+        if parts and not parts[0].startswith("#"):
             yield lineno, parts
 
 
 def _floats(path, lineno, parts, n):
     if len(parts) < n + 1:
-        raise LogFormatError(path, f"'{parts[0]}' needs {n} values, found {len(parts) - 1}", lineno)
+        raise LogFormatError(path, f"'{shown(parts[0])}' needs {n} values, found {len(parts) - 1}", lineno)
     try:
         vals = [float(v) for v in parts[1:n + 1]]
     except ValueError:
-        raise LogFormatError(path, f"'{parts[0]}' has a value that is not a number", lineno) from None
+        raise LogFormatError(path, f"'{shown(parts[0])}' has a value that is not a number", lineno) from None
     if not np.all(np.isfinite(vals)):
-        raise LogFormatError(path, f"'{parts[0]}' has a non-finite value", lineno)
+        raise LogFormatError(path, f"'{shown(parts[0])}' has a non-finite value", lineno)
     return vals
 
 
@@ -50,18 +49,22 @@ def import_librsf(input_txt: Path | str, gt_txt: Path | str | None = None) -> Lo
         kind = parts[0]
         if kind == "odom2diff":
             t, vr, vl, _vy, track, cr, cl = _floats(input_txt, lineno, parts, 7)
+            if not (track > 0 and cr > 0 and cl > 0):
+                raise LogFormatError(input_txt, "odom2diff needs a positive track width and variances", lineno)
             odo.append((t, vl, vr, track, cl, cr))
         elif kind == "range2":
             t, r, cov, ax, ay, aid = _floats(input_txt, lineno, parts, 6)
+            if not (r >= 0 and cov > 0):
+                raise LogFormatError(input_txt, "range2 needs a non-negative range and a positive variance", lineno)
             key = str(int(aid)) if aid == int(aid) else str(aid)
             if key in anchors and np.hypot(anchors[key][0] - ax, anchors[key][1] - ay) > 1e-6:
                 raise LogFormatError(input_txt, f"anchor {key} moved from {anchors[key]} to ({ax}, {ay})", lineno)
             anchors[key] = (ax, ay)
             rng.append((t, key, r, cov))
         else:
-            raise LogFormatError(input_txt, f"unknown measurement type '{kind}'", lineno)
-    if not odo:
-        raise LogFormatError(input_txt, "no odom2diff lines: the log needs wheel speeds")
+            raise LogFormatError(input_txt, f"unknown measurement type '{shown(kind)}'", lineno)
+    if len(odo) < 2:
+        raise LogFormatError(input_txt, "fewer than two odom2diff lines: the log needs wheel speeds")
     o = np.array([row for row in odo])
     if (np.diff(o[:, 0]) <= 0).any():
         raise LogFormatError(input_txt, "odom2diff time does not increase")
@@ -70,8 +73,8 @@ def import_librsf(input_txt: Path | str, gt_txt: Path | str | None = None) -> Lo
     ranges = None
     if rng:
         t = np.array([r[0] for r in rng])
-        if (np.diff(t) <= 0).any():
-            raise LogFormatError(input_txt, "range2 time does not increase")
+        if (np.diff(t) < 0).any():      # several anchors may share a time stamp (LOG_FORMAT.md)
+            raise LogFormatError(input_txt, "range2 time decreases")
         ranges = Ranges(t, np.array([index[r[1]] for r in rng]), np.array([r[2] for r in rng]))
     robot = RobotConfig(
         ticks_per_meter_left=1.0, ticks_per_meter_right=1.0,       # speeds are already in m/s
@@ -89,7 +92,8 @@ def import_librsf(input_txt: Path | str, gt_txt: Path | str | None = None) -> Lo
         pts = [_floats(gt_txt, ln, p, 3) for ln, p in _lines(gt_txt) if p[0] == "point2"]
         if pts:
             g = np.array(pts)
-            keep = np.concatenate([[True], np.diff(g[:, 0]) > 0])
+            # keep strictly increasing times (a row at or before the latest so far is dropped)
+            keep = np.concatenate([[True], g[1:, 0] > np.maximum.accumulate(g[:, 0])[:-1]])
             truth = Truth(g[keep, 0], {"x": g[keep, 1], "y": g[keep, 2]})
     notes = (f"imported from libRSF {input_txt.name} (CC BY-SA 4.0, T. Pfeifer, TU Chemnitz)",)
     return Log(robot=robot, wheel_speeds=WheelSpeeds(o[:, 0], o[:, 1], o[:, 2]), ranges=ranges, truth=truth,
