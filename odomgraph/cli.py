@@ -558,6 +558,13 @@ def import_(
     else:
         from odomgraph.io.importers.librsf import import_librsf
         log = import_librsf(source, ground_truth)
+    from odomgraph.errors import LogFormatError
+    from odomgraph.io.log import check_log
+    try:
+        check_log(log)
+    except LogFormatError as exc:
+        raise LogFormatError(source, f"the import would give a log that cannot be used: {exc.path.name}: "
+                                     f"{exc.problem}") from None
     write_log(log, output, inputs)
     typer.echo(f"wrote {output} ({'; '.join(log.notes)})")
 

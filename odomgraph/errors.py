@@ -28,3 +28,7 @@ class OutputDirError(OdomgraphError):
 
 class OptionError(OdomgraphError):
     """An option or parameter outside its declared range (odomgraph.checks)."""
+
+
+class NotEnoughDataError(OdomgraphError):
+    """The log is valid, but too short or too sparse for what was asked."""

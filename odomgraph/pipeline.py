@@ -36,6 +36,17 @@ def estimate(log: Log, method: Method = Method.ekf, schedule: Schedule = Schedul
     method = parse_method(method)
     _check_option_names(options)
     options = {k: v for k, v in options.items() if v is not None}
+    try:
+        return _run(log, method, schedule, progress, options)
+    except (RuntimeError, ArithmeticError, __import__("numpy").linalg.LinAlgError) as exc:
+        # GTSAM's IndeterminateSystemException and LAPACK failures: the log
+        # does not constrain the problem well enough for this solver.
+        from odomgraph.errors import EstimatorDivergedError
+        first = next((ln.strip() for ln in str(exc).splitlines() if ln.strip()), type(exc).__name__)
+        raise EstimatorDivergedError(f"{method.value}: the solver failed ({first})") from exc
+
+
+def _run(log: Log, method: Method, schedule: Schedule, progress, options: dict) -> Estimate:
     if options.get("range_bias") and method is not Method.batch:
         from odomgraph.errors import OdomgraphError
         raise OdomgraphError(f"--range-bias is estimated by the batch smoother only, not by {method.value}")

@@ -294,6 +294,9 @@ class EKF:
         if progress is not None:
             progress(len(t_ev), len(t_ev))
         self._check()
+        if row == 0:
+            raise EstimatorDivergedError(f"EKF: no wheel measurement at or after its start (t={self.init.t:.6g} s, "
+                                         f"{self.init.note}); the wheel odometry ends at t={m.wheel.t[-1]:.6g} s")
 
         return make_estimate("ekf" if opt.slip_states else "ekf-no-slip", out_t[:row], out_x[:row], out_var[:row],
                              out_pose[:row], nis, list(m.notes) + [self.init.note], time.perf_counter() - wall0,

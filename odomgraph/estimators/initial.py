@@ -16,6 +16,7 @@ import numpy as np
 from factors import encoder
 from factors._math import rot2, wrap_angle
 from odomgraph import state as S
+from odomgraph.errors import NotEnoughDataError
 from odomgraph.estimators.measurements import Measurements
 from odomgraph.estimators.observability import Observability, prior_scale_cov, structure
 from odomgraph.io.robot import RobotConfig
@@ -100,6 +101,9 @@ def initial_state(robot: RobotConfig, meas: Measurements) -> InitialState:
     tw, vw, ww = _wheel_rates(robot, meas)
 
     def finish(t0, pose, pose_cov, note, warnings=()):
+        if np.sum(tw >= t0) < 2:
+            raise NotEnoughDataError(f"fewer than two wheel measurements after the estimator's start at "
+                                     f"t={t0:.6g} s ({note}); the wheel odometry ends at t={tw[-1]:.6g} s")
         x[S.POSE] = pose
         x[S.THETA] = wrap_angle(pose[2])
         k = min(np.searchsorted(tw, t0), len(tw) - 1)

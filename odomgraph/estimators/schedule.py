@@ -36,7 +36,8 @@ class Schedule:
         c = self.calibrate_until
         if c is not None and (isinstance(c, bool) or not isinstance(c, (int, float)) or not math.isfinite(c)
                               or c < 0):
-            raise OptionError(f"calibrate_until (--calibrate-until) must be seconds >= 0 or None, got {c!r}")
+            from odomgraph.checks import value_text
+            raise OptionError(f"calibrate_until (--calibrate-until) must be seconds >= 0 or None, got {value_text(c)}")
         object.__setattr__(self, "hold", Hold(self.hold))
 
     def calibrating(self, t_rel: float) -> bool:

@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from odomgraph.errors import LogFormatError
-from odomgraph.io.csvtable import header_of, read_table, read_text, shown, write_table
+from odomgraph.io.csvtable import header_of, read_table, read_text, shown, text_lines, write_table
 from odomgraph.io.geodesy import latlon_to_local
 from odomgraph.io.outdir import atomic_output_dir
 from odomgraph.io.robot import RobotConfig, load_robot, robot_toml
@@ -198,8 +198,75 @@ def read_log(directory: Path | str) -> Log:
         if not all(np.isfinite(scales)) or min(scales) <= 0:
             raise LogFormatError(p, f"scale factors must be positive finite numbers, got {list(scales)}")
     log = Log(robot, enc, ws, gps, gyro, rng, vel, truth, scales, path=d)
-    check_clock(log)
+    check_log(log)
     return log
+
+
+def check_log(log: Log) -> None:
+    """The checks ``read_log`` makes beyond each file's own: one clock in
+    seconds, and readings a ground robot can give. ``write_log`` makes them
+    too, so that nothing odomgraph writes is refused when read back."""
+    check_clock(log)
+    check_magnitudes(log)
+
+
+#: Values beyond these are not a sensor's reading but a broken file (a spike
+#: of 50 m/s is a fault the estimators handle; 1e308 overflows them).
+MAX_SPEED = 1000.0       # wheel, velocity-sensor speed [m/s]
+MAX_RATE = 1000.0        # yaw rate [rad/s]
+MAX_COORD = 1e8          # positions, ranges, beacons [m]
+
+
+def check_magnitudes(log: Log) -> None:
+    """Refuse readings no ground robot produces, naming file and line."""
+    d = log.path or Path(".")
+    checks = []
+    r = log.robot
+    if log.encoders is not None:
+        e = log.encoders
+        dt = np.diff(e.t)
+        tpm = min(r.ticks_per_meter_left, r.ticks_per_meter_right)
+        speed = np.maximum(np.abs(e.ticks_left[1:]), np.abs(e.ticks_right[1:])) / (tpm * dt)
+        checks.append(("encoders.csv", np.concatenate([[0.0], speed]), MAX_SPEED, "a wheel speed of", "m/s"))
+    if log.wheel_speeds is not None:
+        w = log.wheel_speeds
+        checks.append(("wheel_speeds.csv", np.maximum(np.abs(w.v_left), np.abs(w.v_right)), MAX_SPEED,
+                       "a wheel speed of", "m/s"))
+    if log.gyro is not None:
+        checks.append(("gyro.csv", np.abs(log.gyro.omega), MAX_RATE, "a yaw rate of", "rad/s"))
+    if log.velocity is not None:
+        checks.append(("velocity.csv", np.maximum(np.abs(log.velocity.v), np.abs(log.velocity.omega) / MAX_RATE
+                                                  * MAX_SPEED), MAX_SPEED, "a speed of", "m/s (or rad/s)"))
+    if log.gps is not None:
+        checks.append(("gps.csv", np.maximum(np.abs(log.gps.x), np.abs(log.gps.y)), MAX_COORD, "a coordinate of",
+                       "m"))
+    if log.ranges is not None:
+        checks.append(("ranges.csv", log.ranges.range, MAX_COORD, "a range of", "m"))
+    for name, values, limit, what, unit in checks:
+        bad = values > limit
+        if bad.any():
+            k = int(np.argmax(bad))
+            line = _line_of_row(d / name, k)
+            raise LogFormatError(d / name, f"{what} {float(values[k]):.4g} {unit} is not a reading a ground robot "
+                                           f"gives (limit {limit:g})", line)
+    for b in r.beacons:
+        if max(abs(b.x), abs(b.y)) > MAX_COORD:
+            raise LogFormatError(d / "robot.toml", f"beacon {b.id} lies {max(abs(b.x), abs(b.y)):.4g} m away")
+
+
+def _line_of_row(path: Path, k: int) -> int | None:
+    """File line of data row k (0-based), counting as read_table does."""
+    if not path.is_file():
+        return None
+    seen = -1
+    for lineno, raw in text_lines(read_text(path)):
+        s = raw.strip()
+        if not s or s.startswith("#"):
+            continue
+        if seen >= k:
+            return lineno
+        seen += 1
+    return None
 
 
 #: A time stamp beyond this many seconds is not seconds (1e10 s after 1970 is the year 2286).
@@ -293,6 +360,7 @@ def _read_gps(p: Path, robot: RobotConfig) -> Gps:
 def write_log(log: Log, directory: Path | str, inputs=()) -> Path:
     """Write ``log`` as a log directory (atomically; ``inputs`` are paths the
     output must not touch, see io.outdir). Returns the path."""
+    check_log(log)
     with atomic_output_dir(directory, inputs, kind="log") as d:
         (d / "robot.toml").write_text(robot_toml(log.robot), encoding="utf-8")
         if log.encoders is not None:
@@ -321,6 +389,7 @@ def write_log(log: Log, directory: Path | str, inputs=()) -> Path:
             write_table(d / "truth.csv", {"t": log.truth.t, **log.truth.values}, {"t": "%.6f"})
         if log.truth_scales is not None:
             sl, sr, sb = log.truth_scales
-            (d / "truth.toml").write_text(f"scale_left = {sl!r}\nscale_right = {sr!r}\nscale_track = {sb!r}\n",
+            (d / "truth.toml").write_text(f"scale_left = {float(sl)!r}\nscale_right = {float(sr)!r}\n"
+                                          f"scale_track = {float(sb)!r}\n",
                                           encoding="utf-8")
     return Path(directory)

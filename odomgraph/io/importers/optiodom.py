@@ -15,6 +15,7 @@ from __future__ import annotations
 import io
 import math
 import re
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -79,7 +80,9 @@ def import_optiodom(run_csv: Path | str, metadata: Path | str | None = None, fix
 
     text = read_text(run_csv)
     try:
-        data = np.loadtxt(io.StringIO(text), delimiter=",", ndmin=2)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")      # "input contained no data": checked below
+            data = np.loadtxt(io.StringIO(text), delimiter=",", ndmin=2)
     except ValueError as exc:
         raise LogFormatError(run_csv, f"not a numeric CSV ({shown(str(exc), 120)})") from None
     if data.shape[0] < 2:
