@@ -3,7 +3,8 @@
 ``FilterPyEKF`` is the paper's EKF built on FilterPy's ExtendedKalmanFilter:
 the same models (factors), process noise, schedule and event loop, with
 FilterPy doing every predict and update. It only supports the paper's literal
-pseudo-update hold (FilterPy has no consider update) and no gating.
+pseudo-update hold (FilterPy has no consider update); the gate is ours, applied
+before FilterPy's update.
 """
 from __future__ import annotations
 
@@ -44,11 +45,19 @@ class FilterPyEKF(EKF):
         fp.predict()
         self.x, self.P, self.t = fp.x, fp.P, t
 
-    def update(self, z, h, H, idx, R, gate=None) -> float:
-        assert not self.holding_scale and gate is None
+    def update(self, z, h, H, idx, R, gate=None, ref=None) -> float:
+        assert not self.holding_scale
         Hfull = np.zeros((H.shape[0], S.N))
         Hfull[:, idx] = H
         fp = self.fp
+        y = np.atleast_1d(z) - h
+        self.last_y = y
+        if gate is not None:     # the same Mahalanobis gate as ours, before FilterPy's update
+            Sm = Hfull @ fp.P @ Hfull.T + R
+            nis = float(y @ np.linalg.solve(Sm, y))
+            d = y if ref is None else y - ref
+            if nis > gate and (ref is None or float(d @ np.linalg.solve(Sm, d)) > gate):
+                return -nis
         fp.update(np.atleast_1d(z), lambda x: Hfull, lambda x: h, R=R)
         fp.x[2] = wrap_angle(fp.x[2])
         self.x, self.P = fp.x, fp.P

@@ -138,3 +138,27 @@ def transition_residual(x, y, theta, v, omega, dt, x1, y1, theta1):
     J1[..., 1, 1] = c
     J1[..., 2, 2] = 1.0
     return e, J0, J1
+
+
+def integrate(v, omega, dt, start=(0.0, 0.0, 0.0)):
+    """Poses after each of a sequence of constant-velocity steps (dead reckoning).
+
+    Args:
+        v, omega: (K,) body velocity of step k [m/s, rad/s].
+        dt: (K,) its length [s].
+        start: (x, y, theta) before the first step, world frame [m, rad].
+
+    Returns:
+        (K + 1, 3) poses: the start, then after each step (theta not wrapped).
+    Vectorised: headings by a running sum, then every step's exact arc chord
+    (``propagate`` from the origin) at once.
+    """
+    v, omega, dt = (np.asarray(a, float) for a in (v, omega, dt))
+    x0, y0, th0 = start
+    th = th0 + np.concatenate([[0.0], np.cumsum(omega * dt)])
+    step, _ = propagate(0.0, 0.0, th[:-1], v, omega, dt)
+    out = np.empty((len(v) + 1, 3))
+    out[:, 0] = x0 + np.concatenate([[0.0], np.cumsum(step[..., 0])])
+    out[:, 1] = y0 + np.concatenate([[0.0], np.cumsum(step[..., 1])])
+    out[:, 2] = th
+    return out

@@ -258,13 +258,44 @@ def simulate(
         help="Slip event 'wheel:start:end:speed' (s, s, m/s); repeat for more. Replaces the scenario's.")] = None,
     no_slip: Annotated[bool, typer.Option("--no-slip", help="No slip events at all.")] = False,
     initial: Annotated[bool, typer.Option(help="Write the true start pose as robot.toml [initial].")] = False,
+    outliers: Annotated[Optional[str], typer.Option(
+        help="Fault: GPS and range outliers 'rate:size[:from]' (fraction, m, s), e.g. 0.05:5.", rich_help_panel="Faults")]
+    = None,
+    outage: Annotated[Optional[list[str]], typer.Option(
+        help="Fault: 'sensor:start:end' [s] with no data from gps, gyro, ranges or velocity; repeatable.",
+        rich_help_panel="Faults")] = None,
+    stop: Annotated[Optional[list[str]], typer.Option(
+        help="Fault: 'sensor:time' [s] from which the sensor is silent for good; repeatable.",
+        rich_help_panel="Faults")] = None,
+    stall: Annotated[Optional[list[str]], typer.Option(
+        help="Fault: 'start:end[:left:right]' [s, m/s]: the robot stands still while both wheels spin "
+             "(default 0.5 m/s each); repeatable.", rich_help_panel="Faults")] = None,
+    motion: Annotated[Optional[str], typer.Option(
+        help="Fault: replace the motion with 'still', 'rotate' (in place) or 'slow' (3 % speed).",
+        rich_help_panel="Faults")] = None,
+    encoder_dropout: Annotated[Optional[list[str]], typer.Option(
+        help="Fault: 'start:end' [s]: encoder rows lost, their ticks arrive summed in the next row; repeatable.",
+        rich_help_panel="Faults")] = None,
+    drop_rate: Annotated[float, typer.Option(help="Fault: fraction of single encoder rows lost (ticks summed "
+                                                  "into the next).", rich_help_panel="Faults")] = 0.0,
+    dup_rate: Annotated[float, typer.Option(help="Fault: fraction of encoder rows written twice.",
+                                            rich_help_panel="Faults")] = 0.0,
+    clock_jump: Annotated[Optional[list[str]], typer.Option(
+        help="Fault: 'sensor:time:jump' [s]: that file's stamps from time on are off by jump; repeatable.",
+        rich_help_panel="Faults")] = None,
+    spike: Annotated[Optional[list[str]], typer.Option(
+        help="Fault: 'sensor:time:size': one encoders (left wheel, m/s) or gyro (rad/s) sample off by size; "
+             "repeatable.", rich_help_panel="Faults")] = None,
 ):
-    """Simulate a scenario and write a log directory with truth.csv and truth.toml."""
+    """Simulate a scenario and write a log directory with truth.csv and truth.toml.
+
+    The fault options inject what real logs contain (odomgraph.sim.faults);
+    truth stays what really happened."""
     import math
     from odomgraph.errors import OdomgraphError
     from odomgraph.io.log import write_log
     from odomgraph.sim.scenarios import SCENARIOS, SlipEvent
-    from odomgraph.sim.simulate import beacons_around_path, simulate as run_sim
+    from odomgraph.sim.simulate import beacons_around_path
 
     from odomgraph.io.outdir import check_output
     check_output(output)
@@ -314,7 +345,16 @@ def simulate(
             except ValueError:
                 raise OdomgraphError(f"--slip: expected numbers in {s!r}") from None
         sc = sc.with_(slips=tuple(events))
-    log = run_sim(sc, seed)
+    from odomgraph.sim.faults import Faults, inject, parse
+    kw = parse("outliers", outliers) if outliers else {}
+    faults = Faults(**kw, outages=tuple(parse("outage", v) for v in outage or ()),
+                    stops=tuple(parse("stop", v) for v in stop or ()),
+                    stalls=tuple(parse("stall", v) for v in stall or ()), motion=motion,
+                    encoder_dropouts=tuple(parse("encoder-dropout", v) for v in encoder_dropout or ()),
+                    encoder_drop_rate=drop_rate, encoder_dup_rate=dup_rate,
+                    clock_jumps=tuple(parse("clock-jump", v) for v in clock_jump or ()),
+                    spikes=tuple(parse("spike", v) for v in spike or ()))
+    log = inject(sc, faults, seed)
     write_log(log, output)
     typer.echo(f"wrote {output} ({sc.name}, {sc.duration:g} s, seed {seed})")
 

@@ -134,7 +134,7 @@ def summary(est: Estimate, log: Log, schedule: Schedule) -> dict:
         "scale_combinations": combinations_of(est.mean[-1, 8:11], est.scale_cov(given=True)),
         **({"range_bias": est.range_bias} if est.range_bias is not None else {}),
         "nis": nis_summary(est),
-        "warnings": warnings_of(est),
+        "warnings": list(log.warnings) + warnings_of(est),
         "notes": est.notes,
     }
     if est.update_times is not None and len(est.update_times) >= 10:

@@ -137,20 +137,38 @@ def test_compare_refuses_a_schedule_the_ekf_cannot_run(short_log_dir, tmp_path):
     assert not (tmp_path / "x").exists()
 
 
-def test_a_diverging_estimator_is_reported_not_fatal(tmp_path):
+def test_every_estimator_finishes_the_real_librsf_cut(tmp_path):
     """On the real libRSF cut the nominal wheel parameters are off by about 2x.
-    The incremental smoothers' linear factors, linearised at predictions made
-    with them, stop explaining the ranges; their divergence watch says so, and
-    the report carries on with the others."""
+    The incremental smoothers once drifted away from the ranges there; with a
+    start fitted to the first ranges they finish, as do the EKF and batch."""
     from odomgraph.io.importers.librsf import import_librsf
     from odomgraph.pipeline import compare_to_dir
     log = import_librsf(Path(__file__).parent / "data" / "librsf" / "Indoor_UWB_Input.txt")
     cmp = compare_to_dir(log, tmp_path / "rep", Schedule(0.0))
     est = cmp.metrics["estimators"]
-    assert "diverged at t=" in est["isam2"]["failed"] and "ranges residuals" in est["isam2"]["failed"]
-    assert est["isam2-online"] == est["isam2"]
-    assert est["batch"]["rms_position_m"] < 0.25 and est["ekf"]["rms_position_m"] < 0.4
+    assert not any("failed" in e for e in est.values()), est
+    # measured 0.25, 0.29, 0.37 m
+    assert est["batch"]["rms_position_m"] < 0.3 and est["isam2"]["rms_position_m"] < 0.35
+    assert est["ekf"]["rms_position_m"] < 0.4
+
+
+def test_a_diverging_estimator_is_reported_not_fatal(tmp_path, short_log_dir, monkeypatch):
+    """A diverged estimator is a result of the comparison: the report says so
+    and carries on with the others."""
+    import odomgraph.estimators.incremental as inc
+    from odomgraph.errors import EstimatorDivergedError
+    from odomgraph.io.log import read_log
+    from odomgraph.pipeline import compare_to_dir
+
+    def diverge(*a, **k):
+        raise EstimatorDivergedError("isam2 diverged at t=12.000 s: the running mean of whitened squared "
+                                     "ranges residuals is 80 (expected about 1)")
+    monkeypatch.setattr(inc, "run_isam2", diverge)
+    cmp = compare_to_dir(read_log(short_log_dir), tmp_path / "rep", Schedule(20.0))
+    est = cmp.metrics["estimators"]
+    assert "diverged at t=" in est["isam2"]["failed"] and est["isam2-online"] == est["isam2"]
+    assert est["batch"]["rms_position_m"] < 0.05 and est["ekf"]["rms_position_m"] < 0.05
     names = sorted(p.name for p in (tmp_path / "rep").iterdir() if p.name != ".odomgraph")
-    assert "isam2" not in names and "batch" in names and "fig7_gps_deviation.png" not in names  # no GPS
+    assert "isam2" not in names and "batch" in names and "ekf" in names
     page = (tmp_path / "rep" / "report.html").read_text()
     assert "<b>isam2 diverged</b>" in page

@@ -22,9 +22,10 @@ from factors._math import wrap_angle
 from factors.motion import propagate
 from odomgraph import state as S
 from odomgraph.errors import EstimatorDivergedError
-from odomgraph.estimators.ekf import (_DOF, _ENC_IDX, _GYRO_IDX, _POSE_IDX, _SCALE_IDX, _SLIP_IDX, _VEL_IDX, GPS,
-                                      GYRO, RANGE, SENSOR_NAMES, WHEEL, EKFOptions, event_stream,
-                                      make_estimate)
+from odomgraph.estimators.ekf import (_DOF, _ENC_IDX, _GYRO_IDX, _POSE_IDX, _SCALE_IDX, _SLIP_IDX, _VEL_IDX, GATE_HISTORY,
+                                      GATED,
+                                      GPS, GYRO, RANGE, SENSOR_NAMES, VEL, WHEEL, EKFOptions, event_stream,
+                                      gate_thresholds, make_estimate, reacquire_widening)
 from odomgraph.estimators.initial import initial_state
 from odomgraph.estimators.measurements import from_log, slip_intensity
 from odomgraph.estimators.observability import decondition
@@ -114,7 +115,8 @@ def run_ekf_many(logs: list[Log], schedule: Schedule = Schedule(), options: EKFO
     R_gyro = np.array([[r.gyro_sigma**2]])
     R_vel = np.diag(np.square(r.velocity_sigma))
     R_rng = np.array([[r.range_sigma**2]])
-    track, lever_gps, lever_rng, gate = r.track_width, r.gps_lever_arm, r.range_lever_arm, opt.gate
+    track, lever_gps, lever_rng = r.track_width, r.gps_lever_arm, r.range_lever_arm
+    gates = gate_thresholds(opt)
     t_switch = None if sch.calibrate_until is None else m0.t_start + sch.calibrate_until
     switch_sigma = None
     holding = False
@@ -126,27 +128,42 @@ def run_ekf_many(logs: list[Log], schedule: Schedule = Schedule(), options: EKFO
     nis_t = {k: [] for k in range(5)}
     nis_v = {k: [] for k in range(5)}
     nis_ema = np.tile(np.asarray(_DOF, float), (n, 1))
-    rej_ema = np.zeros((n, 5))
     nis_clip = np.array([10.0 * opt.max_mean_nis * d for d in _DOF])
-    seen = np.zeros(5, int)
+    seen_run = np.zeros((n, 5), int)
     failed: list[EstimatorDivergedError | None] = [None] * n
     dead = np.zeros(n, bool)
     frozen_x, frozen_P = x.copy(), P.copy()
     t_now = inits[0].t
     row = 0
 
-    def update(z, h, H, idx, R, use_gate=False):
+    run = {}                                     # gated sensor -> (N, reacquire_after, m) innovations of the runs
+    run_len = {c: np.zeros(n, int) for c in GATED}
+    recoveries: list[list[str]] = [[] for _ in range(n)]
+    last_y = None
+
+    hist: dict[tuple, list] = {}                 # (sensor, beacon) -> list of (N, m) innovations, newest last
+
+    def reference(key):
+        """(N, m) median of the recent innovations (ekf.gate_reference), or None."""
+        hk = hist.get(key, [])
+        return None if len(hk) < 3 else np.median(np.stack(hk), 0)
+
+    def update(z, h, H, idx, R, gate=None, ref=None):
         """Batched Kalman update (see EKF.update); returns (N,) NIS, negative where gated."""
-        nonlocal x, P
+        nonlocal x, P, last_y
         Ht = np.swapaxes(H, 1, 2)
         PHt = P[:, :, idx] @ Ht
         Sm = H @ PHt[:, idx, :] + R
         y = z - h
+        last_y = y
         Sinv = _inv_small(Sm)
         nis = np.einsum("ni,nij,nj->n", y, Sinv, y)
         K = PHt @ Sinv
-        if use_gate and gate is not None:
+        if gate is not None:
             rej = nis > gate
+            if ref is not None:
+                d = y - ref
+                rej &= np.einsum("ni,nij,nj->n", d, Sinv, d) > gate
             K[rej] = 0.0
             nis = np.where(rej, -nis, nis)
         if holding:
@@ -212,28 +229,44 @@ def run_ekf_many(logs: list[Log], schedule: Schedule = Schedule(), options: EKFO
             elif code == GPS:
                 h, H = gps.antenna_position(x[:, 0], x[:, 1], x[:, 2], lever_gps)    # eq. 8-9
                 Rg = np.eye(2) * gps_s2[:, i, None, None]
-                nis = update(gps_z[:, i], h, H, _POSE_IDX, Rg, use_gate=True)
+                key = (GPS, 0)
+                nis = update(gps_z[:, i], h, H, _POSE_IDX, Rg, gates[GPS], reference(key))
             elif code == RANGE:
                 h, H = ranging.beacon_range(x[:, 0], x[:, 1], x[:, 2], rng_b[i], lever_rng)  # eq. 12-16
-                nis = update(rng_z[:, i], h, H[:, :, :3], _POSE_IDX, R_rng, use_gate=True)
+                key = (RANGE, int(m0.ranges_id[i]))
+                nis = update(rng_z[:, i], h, H[:, :, :3], _POSE_IDX, R_rng, gates[RANGE], reference(key))
             else:
                 h, H = velocity.body_velocity(x[:, 3], x[:, 4])                      # sec. VI-B
-                nis = update(vel_z[:, i], h, H, _VEL_IDX, R_vel, use_gate=True)
+                key = (VEL, 0)
+                nis = update(vel_z[:, i], h, H, _VEL_IDX, R_vel, gates[VEL], reference(key))
             nis_t[code].append(t)
             nis_v[code].append(nis)
-            # Divergence watch, per run, as in EKF.run.
             rejected = nis < 0
-            nk = np.minimum(np.where(rejected, gate if gate is not None else 0.0, nis), nis_clip[code])
-            nis_ema[:, code] = 0.98 * nis_ema[:, code] + 0.02 * nk
-            rej_ema[:, code] = 0.98 * rej_ema[:, code] + 0.02 * rejected
-            seen[code] += 1
-            if seen[code] > 100:
-                lost = (nis_ema[:, code] > opt.max_mean_nis * _DOF[code]) | (rej_ema[:, code] > 0.5)
-                for j in np.nonzero(lost & ~dead)[0]:
-                    what = (f"the running mean NIS of {SENSOR_NAMES[code]} is {nis_ema[j, code]:.0f} "
-                            f"(expected {_DOF[code]})" if not rej_ema[j, code] > 0.5 else
-                            f"the gate rejects {rej_ema[j, code]:.0%} of {SENSOR_NAMES[code]}")
-                    kill(j, f"EKF diverged at t={t:.3f} s: {what}; the model no longer explains the data")
+            if code in run_len:
+                hk = hist.setdefault(key, [])
+                hk.append(last_y.copy())
+                if len(hk) > GATE_HISTORY:
+                    del hk[0]
+                # Re-acquisition after a run of rejections, per run, as in EKF.run.
+                rl = run_len[code]
+                if code not in run:
+                    run[code] = np.zeros((n, opt.reacquire_after, last_y.shape[1]))
+                run[code][rejected, rl[rejected]] = last_y[rejected]
+                rl[:] = np.where(rejected, rl + 1, 0)
+                for j in np.flatnonzero(rl >= opt.reacquire_after):
+                    blk, add = reacquire_widening(code, run[code][j])
+                    P[j, blk, blk] += np.diag(add)
+                    recoveries[j].append(f"t={t:.2f} s: {rl[j]} {SENSOR_NAMES[code]} measurements in a row rejected; "
+                                         "covariance widened to re-acquire")
+                    rl[j] = 0
+            # Divergence watch on the accepted NIS, per run, as in EKF.run.
+            nk = np.minimum(np.where(rejected, nis_ema[:, code], nis), nis_clip[code])
+            nis_ema[:, code] = np.where(rejected, nis_ema[:, code], 0.98 * nis_ema[:, code] + 0.02 * nk)
+            seen_run[:, code] += ~rejected
+            lost = (seen_run[:, code] > 100) & (nis_ema[:, code] > opt.max_mean_nis * _DOF[code])
+            for j in np.nonzero(lost & ~dead)[0]:
+                kill(j, f"EKF diverged at t={t:.3f} s: the running mean NIS of {SENSOR_NAMES[code]} is "
+                        f"{nis_ema[j, code]:.0f} (expected {_DOF[code]}); the model no longer explains the data")
             if dead.any():
                 x[dead], P[dead] = frozen_x[dead], frozen_P[dead]
             if progress is not None and k % stride == 0:
@@ -250,8 +283,10 @@ def run_ekf_many(logs: list[Log], schedule: Schedule = Schedule(), options: EKFO
             out.append(failed[j])
             continue
         nis_j = {c: list(zip(nis_t[c], nis_arr[c][:, j])) for c in nis_arr}
-        out.append(make_estimate("ekf" if opt.slip_states else "ekf-no-slip", out_t, out_x[:, j], out_var[:, j],
-                                 out_pose[:, j], nis_j, list(meas[j].notes) + [inits[j].note], wall, n_up,
-                                 t_switch, None if switch_sigma is None else switch_sigma[j], sch.hold,
-                                 P[j, _SCALE_IDX, _SCALE_IDX].copy(), inits[j]))
+        est = make_estimate("ekf" if opt.slip_states else "ekf-no-slip", out_t, out_x[:, j], out_var[:, j],
+                            out_pose[:, j], nis_j, list(meas[j].notes) + [inits[j].note], wall, n_up,
+                            t_switch, None if switch_sigma is None else switch_sigma[j], sch.hold,
+                            P[j, _SCALE_IDX, _SCALE_IDX].copy(), inits[j])
+        est.recoveries = recoveries[j]
+        out.append(est)
     return out

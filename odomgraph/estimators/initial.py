@@ -1,11 +1,14 @@
 """The first state and its covariance, from the data when robot.toml has no [initial].
 
-LOG_FORMAT forbids assuming a start at the origin. Position comes from the
-first absolute fixes (GPS, or multilateration of the first ranges); heading
-from the first motion: the direction between two fixes far enough apart,
-corrected for the turn the wheels report in between and for reversing. The
-estimator starts at the second fix's time, so this stays causal: nothing after
-the start time is used.
+LOG_FORMAT forbids assuming a start at the origin. The start pose is fitted,
+robustly, to the first seconds of absolute fixes (GPS, or multilateration of
+the first ranges): the wheels' own path, dead reckoned with the nominal
+parameters from the first wheel measurement, is mapped onto the fixes by the
+rigid transform most of them agree with (``consensus_pose``). So an outlier
+among the first fixes cannot poison the start, and a small robot that turns
+at once still gets its heading. Every estimator starts at the first wheel
+measurement; the fit reads up to CONSENSUS_WINDOW seconds of fixes ahead
+(for a strictly causal start, give robot.toml an [initial] pose).
 """
 from __future__ import annotations
 
@@ -14,15 +17,14 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from factors import encoder
-from factors._math import rot2, wrap_angle
+from factors._math import wrap_angle
+from factors.motion import integrate
 from odomgraph import state as S
 from odomgraph.errors import NotEnoughDataError
 from odomgraph.estimators.measurements import Measurements
 from odomgraph.estimators.observability import Observability, prior_scale_cov, structure
 from odomgraph.io.robot import RobotConfig
 
-#: Most heading change between the two fixes for the chord to give a heading [rad].
-_MAX_TURN = 0.35
 #: Longest multilateration window: ranges older than this are not combined [s].
 _RANGE_WINDOW = 0.6
 
@@ -45,14 +47,6 @@ def _wheel_rates(robot: RobotConfig, meas: Measurements):
     v, w = encoder.body_velocity(meas.wheel.m[:, 0], meas.wheel.m[:, 1], 0.0, 0.0, 1.0, 1.0, 1.0,
                                  robot.track_width)
     return meas.wheel.t, v, w
-
-
-def _integral(t, rate, t0, t1):
-    """Integral of a sampled rate over [t0, t1] (trapezoid on a fine grid)."""
-    if t1 <= t0:
-        return 0.0
-    grid = np.linspace(t0, t1, max(3, int((t1 - t0) * 50)))
-    return float(np.trapezoid(np.interp(grid, t, rate), grid))
 
 
 def _range_fixes(meas: Measurements, robot: RobotConfig, limit: int = 400):
@@ -131,36 +125,199 @@ def initial_state(robot: RobotConfig, meas: Measurements) -> InitialState:
         msg = ("no absolute sensor and no [initial] pose in robot.toml: the start pose is taken as the origin, "
                "heading 0 (positions are relative to it)")
         return finish(t0, np.zeros(3), np.diag([1e-6, 1e-6, 1e-6]), msg, (msg,))
+    fit = consensus_pose(tw, meas.wheel.m[:, 0], meas.wheel.m[:, 1], _wheel_dt(meas), robot.track_width, *fixes,
+                         pn.initial_scale_sigma)
+    return finish(tw[0], fit.pose, fit.cov, f"initial pose from {source}: {fit.note}", fit.warnings)
 
-    ft, fp, fs, lever = fixes
+
+# ------------------------------------------------------------- consensus start
+#: Longest stretch of fixes the start is fitted on [s]: dead reckoning with
+#: nominal parameters must stay close to the truth over it.
+CONSENSUS_WINDOW = 30.0
+#: Travel the window should contain for a heading [m], at least (or 20 fix sigmas).
+CONSENSUS_TRAVEL = 2.0
+#: RANSAC hypotheses (pairs of fixes) tried at most.
+CONSENSUS_PAIRS = 600
+
+
+@dataclass(frozen=True)
+class ConsensusFit:
+    pose: np.ndarray
+    """(3,) (x, y, theta) of the robot at the first wheel measurement, world frame [m, rad]."""
+    cov: np.ndarray
+    """(3, 3) its covariance."""
+    inliers: int
+    outliers: int
+    note: str
+    warnings: tuple[str, ...] = ()
+
+
+def _wheel_dt(meas: Measurements) -> np.ndarray:
+    """(K,) length of each wheel measurement's step for dead reckoning [s]: the
+    time to the next measurement (the last one gets the median)."""
+    t = meas.wheel.t
+    dt = np.diff(t)
+    return np.append(dt, np.median(dt) if dt.size else 0.0)
+
+
+def _antenna_path(ml, mr, dtw, track, lever, e=(0.0, 0.0, 0.0)):
+    """Dead-reckoned poses (K+1, 3) from the first wheel measurement, and a
+    function giving the antenna at given times, with relative scale errors
+    e = (e_left, e_right, e_track) taken out of the nominal wheel speeds."""
+    ul, ur = ml / (1.0 + e[0]), mr / (1.0 + e[1])
+    v, w = 0.5 * (ul + ur), (ur - ul) / (track * (1.0 + e[2]))
+    return integrate(v, w, dtw)
+
+
+def _antenna_at(dr, t_dr, ft, lever):
+    th = np.interp(ft, t_dr, dr[:, 2])
+    return np.stack([np.interp(ft, t_dr, dr[:, 0]) + np.cos(th) * lever[0] - np.sin(th) * lever[1],
+                     np.interp(ft, t_dr, dr[:, 1]) + np.sin(th) * lever[0] + np.cos(th) * lever[1]], -1)
+
+
+def consensus_pose(tw, ml, mr, dtw, track, ft, fp, fs, lever, scale_sigma: float) -> ConsensusFit:
+    """The start pose that best maps the wheels' own path onto the first fixes,
+    robust to outliers among them (RANSAC, then least squares).
+
+    The wheels, integrated with the nominal parameters from the first wheel
+    measurement (pose 0), give a path d(t) in their own frame; fixes are the
+    antenna p_k = R(phi) (d(t_k) + R(theta_d(t_k)) l) + c. Any two fixes far
+    enough apart give a hypothesis (phi, c); the one most fixes agree with
+    (within 3.4 sigma plus the drift the scale prior allows) wins. It is then
+    refined on its inliers together with the three scale errors, under their
+    prior: a few percent between the wheels bends a straight run by tenths of
+    a radian over two metres, and a fit that ignored it gave a heading 5 sigma
+    off. An outlier in the first seconds can neither place nor turn the start,
+    and a robot that turns early or moves slowly still gets its heading from
+    the whole arc, not "the first straight metre".
+
+    Args:
+        tw, ml, mr, dtw: (K,) wheel measurement times [s], nominal left and
+            right wheel speeds [m/s] and step lengths [s].
+        track: nominal track width [m].
+        ft, fp, fs: (M,) fix times, (M, 2) antenna positions, (M,) sigma [m].
+        lever: (2,) antenna in the robot frame [m].
+        scale_sigma: prior 1-sigma of the scale factors.
+
+    Returns the pose at tw[0] with an honest covariance: the fit's (scale
+    errors marginalised), scaled by its reduced chi-square when the fixes
+    scatter more than their sigma says, plus what dead reckoning between
+    tw[0] and the first fix can have drifted.
+    """
     lever = np.asarray(lever, float)
-    lev = float(np.hypot(*lever))
-    for i in range(len(ft)):
-        for k in range(i + 1, len(ft)):
-            d = fp[k] - fp[i]
-            dist = float(np.hypot(*d))
-            # Far enough for the chord to give a good heading (the heading sigma
-            # below says how good). GPS is used outdoors with room to drive:
-            # wait for 1 m and 20 fix sigmas. Ranges are used indoors, where a
-            # labyrinth rarely offers a straight metre: 0.5 m and 5 sigmas.
-            d_min, n_sig = (1.0, 20.0) if source == "GPS" else (0.5, 5.0)
-            if dist < max(d_min, n_sig * max(fs[i], fs[k])):
-                continue
-            turn = _integral(tw, ww, ft[i], ft[k])
-            if abs(turn) > _MAX_TURN:
-                break  # the robot turned in between: try a later first fix
-            travelled = _integral(tw, vw, ft[i], ft[k])
-            chord = np.arctan2(d[1], d[0]) + (np.pi if travelled < 0 else 0.0)
-            theta = chord + 0.5 * turn
-            # chord noise, lever arm swept by the turn, arc-vs-chord, scale error of the turn
-            s_th = np.sqrt(2 * (fs[i] ** 2 + fs[k] ** 2) / dist**2 + (lev * abs(turn) / dist) ** 2
-                           + (0.25 * turn) ** 2 + 0.03**2)
-            pos = fp[k] - rot2(theta) @ lever
-            s_p = np.sqrt(fs[k] ** 2 + (lev * s_th) ** 2)
-            return finish(ft[k], np.array([pos[0], pos[1], theta]), np.diag([s_p**2, s_p**2, s_th**2]),
-                          f"initial pose from {source}: position at t={ft[k]:.2f} s, heading from "
-                          f"{dist:.2f} m of motion")
-    # Never moved far enough in a straight line: position only, heading unknown.
-    s_p = float(np.sqrt(fs[0] ** 2 + lev**2))
-    return finish(ft[0], np.array([fp[0][0], fp[0][1], 0.0]), np.diag([s_p**2, s_p**2, np.pi**2]),
-                  f"initial position from {source}; heading not observable from the first motion (sigma = pi)")
+    dr = _antenna_path(ml, mr, dtw, track, lever)                 # (K+1, 3), DR pose before step k
+    t_dr = np.append(tw, tw[-1] + dtw[-1])
+    vw, ww = 0.5 * (ml + mr), (mr - ml) / track
+    travel = np.concatenate([[0.0], np.cumsum(np.abs(vw) * dtw)])
+    turned = np.concatenate([[0.0], np.cumsum(np.abs(ww) * dtw)])
+    ft, fp, fs = np.asarray(ft, float), np.asarray(fp, float), np.asarray(fs, float)
+    d = _antenna_at(dr, t_dr, ft, lever)
+    s_f = np.interp(ft, t_dr, travel)
+    # The window: from the first fix until enough travel (and fixes), at most CONSENSUS_WINDOW.
+    need = max(CONSENSUS_TRAVEL, 20.0 * float(np.median(fs)))
+    within = ft <= ft[0] + CONSENSUS_WINDOW
+    enough = np.flatnonzero(within & (s_f - s_f[0] >= need) & (np.arange(len(ft)) >= 5))
+    m = int(enough[0]) + 1 if enough.size else int(within.sum())
+    m = max(m, min(len(ft), 8))
+    W_t, W_p, W_s, W_d, W_sf = ft[:m], fp[:m], fs[:m], d[:m], s_f[:m]
+    ds = np.abs(W_sf - W_sf[0])
+    # What nominal parameters may have drifted [m]: along track with the
+    # common scale, sideways with the wheels' difference (a curve of
+    # curvature sqrt(2) sigma / track).
+    drift = 2.0 * scale_sigma * ds + 0.5 * (2.0 * np.sqrt(2.0) * scale_sigma / track) * ds**2
+    thr = 3.4 * W_s + drift
+    spread = float(np.max(np.hypot(*(W_d - W_d.mean(0)).T))) if m > 1 else 0.0
+    t_first_gap = float(ft[0] - tw[0])
+    back = 2.0 * scale_sigma * float(np.interp(ft[0], t_dr, travel))
+    back_th = scale_sigma * float(np.interp(ft[0], t_dr, turned)) + \
+        np.sqrt(2.0) * scale_sigma * float(np.interp(ft[0], t_dr, travel)) / track
+    if spread < max(3.0 * float(np.median(W_s)), 0.05) or m < 2:
+        # The antenna hardly moved: position from the median fix, heading unknown.
+        med = np.median(W_p, 0)
+        s_p = float(np.hypot(np.median(W_s), np.hypot(*lever))) + back
+        pose = np.array([med[0], med[1], 0.0])
+        return ConsensusFit(pose, np.diag([s_p**2, s_p**2, np.pi**2]), m, 0,
+                            f"position from the median of {m} fixes; heading not observable from the first motion "
+                            "(sigma = pi)")
+    rng = np.random.default_rng(0)
+    sep = np.hypot(*(W_d[:, None, :] - W_d[None, :, :]).transpose(2, 0, 1))
+    i_idx, j_idx = np.nonzero(np.triu(sep >= 0.3 * sep.max(), 1))
+    if i_idx.size > CONSENSUS_PAIRS:
+        pick = rng.choice(i_idx.size, CONSENSUS_PAIRS, replace=False)
+        i_idx, j_idx = i_idx[pick], j_idx[pick]
+    dp, dd = W_p[j_idx] - W_p[i_idx], W_d[j_idx] - W_d[i_idx]
+    phi = np.arctan2(dp[:, 1], dp[:, 0]) - np.arctan2(dd[:, 1], dd[:, 0])
+    c, sn = np.cos(phi), np.sin(phi)
+    cx = W_p[i_idx, 0] - (c * W_d[i_idx, 0] - sn * W_d[i_idx, 1])
+    cy = W_p[i_idx, 1] - (sn * W_d[i_idx, 0] + c * W_d[i_idx, 1])
+    ex = W_p[None, :, 0] - (c[:, None] * W_d[None, :, 0] - sn[:, None] * W_d[None, :, 1]) - cx[:, None]
+    ey = W_p[None, :, 1] - (sn[:, None] * W_d[None, :, 0] + c[:, None] * W_d[None, :, 1]) - cy[:, None]
+    e = np.hypot(ex, ey)
+    inl = e <= thr[None, :]
+    score = inl.sum(1) - np.minimum((e / thr[None, :]) ** 2, 1.0).sum(1) / (m + 1)   # count, then closeness
+    best = int(np.argmax(score))
+    keep = inl[best]
+
+    # Least squares on the inliers: (cx, cy, phi) and the scale errors
+    # (e_left, e_right, e_track) under their prior, by Gauss-Newton with a
+    # numerical Jacobian (each evaluation re-integrates the window's wheels).
+    k_end = int(np.searchsorted(t_dr, W_t[-1])) + 2
+    sl = slice(0, min(k_end, len(ml)))
+
+    def predict(q, sel):
+        path = _antenna_path(ml[sl], mr[sl], dtw[sl], track, lever, q[3:6])
+        a = _antenna_at(path, t_dr[:path.shape[0]], W_t[sel], lever)
+        cq, sq = np.cos(q[2]), np.sin(q[2])
+        return np.stack([cq * a[:, 0] - sq * a[:, 1] + q[0], sq * a[:, 0] + cq * a[:, 1] + q[1]], -1)
+
+    q = np.array([cx[best], cy[best], phi[best], 0.0, 0.0, 0.0])
+    prior_w = np.array([0.0, 0.0, 0.0, 1.0, 1.0, 1.0]) / scale_sigma
+    for _round in range(2):
+        w_sqrt = np.repeat(1.0 / W_s[keep], 2)
+        for _ in range(10):
+            r = np.concatenate([((W_p[keep] - predict(q, keep)).reshape(-1)) * w_sqrt, -prior_w * q])
+            J = np.empty((r.size, 6))
+            for j in range(6):
+                h = 1e-6 if j < 3 else 1e-7
+                dq = q.copy()
+                dq[j] += h
+                rj = np.concatenate([((W_p[keep] - predict(dq, keep)).reshape(-1)) * w_sqrt, -prior_w * dq])
+                J[:, j] = -(rj - r) / h
+            J[-6:, :] = np.diag(prior_w)
+            J = J[np.r_[np.arange(r.size - 6), r.size - 6 + np.flatnonzero(prior_w)]]
+            r = r[np.r_[np.arange(r.size - 6), r.size - 6 + np.flatnonzero(prior_w)]]
+            step, *_ = np.linalg.lstsq(J, r, rcond=None)
+            q = q + step
+            if np.abs(step).max() < 1e-10:
+                break
+        # Inliers again, against the refined model: residuals within 3.4 sigma.
+        res = np.hypot(*(W_p - predict(q, slice(None))).T)
+        keep = res <= 3.4 * W_s * max(1.0, float(np.sqrt(np.mean((res[keep] / W_s[keep]) ** 2) / 2.0)))
+    n_out = int(m - keep.sum())
+    H = J.T @ J
+    cov6 = np.linalg.inv(H)
+    nfix = 2 * int(keep.sum())
+    chi2 = float(np.sum(r[:nfix] ** 2)) / max(1, nfix - 3)
+    cov = cov6[:3, :3] * max(1.0, chi2)
+    # Ambiguity: a hypothesis nearly as well supported but turned well away
+    # (0.3 rad, and 5 sigma) is a second mode; the heading sigma covers both.
+    close = inl.sum(1) >= 0.9 * inl[best].sum()
+    dphi = np.abs(np.angle(np.exp(1j * (phi[close] - q[2]))))
+    dphi = dphi[dphi > max(0.3, 5.0 * np.sqrt(cov[2, 2]) + 0.1)]
+    amb = float(dphi.max()) if dphi.size else 0.0
+    warnings = ()
+    if amb > 0.0:
+        cov[2, 2] = max(cov[2, 2], amb**2)
+        warnings = (f"initial heading is ambiguous: fits {np.degrees(amb):.0f} deg apart explain the first fixes "
+                    "nearly as well; its sigma says so",)
+    # Dead reckoning's own error back to the first wheel measurement, and a
+    # floor for what the rigid-path model leaves out (timing, interpolation).
+    floor = 0.5 * float(np.median(W_s))
+    cov[0, 0] += back**2 + floor**2
+    cov[1, 1] += back**2 + floor**2
+    cov[2, 2] += back_th**2 + 0.01**2
+    note = (f"start fitted to {int(keep.sum())} of the first {m} fixes ({W_t[-1] - W_t[0]:.1f} s, "
+            f"{W_sf[-1] - W_sf[0]:.1f} m of travel)" + (f", {n_out} rejected as outliers" if n_out else ""))
+    if t_first_gap > 1.0:
+        note += f"; carried back {t_first_gap:.1f} s to the first wheel measurement"
+    return ConsensusFit(q[:3].copy(), cov, int(keep.sum()), n_out, note, warnings)

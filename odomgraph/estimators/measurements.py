@@ -44,6 +44,8 @@ class Measurements:
     velocity: tuple[np.ndarray, np.ndarray] | None = None
     """(t, (K,2) [v, omega])."""
     notes: tuple[str, ...] = field(default=())
+    ranges_id: np.ndarray | None = None
+    """(K,) index into robot.beacons of each range."""
 
 
 def from_log(log: Log) -> Measurements:
@@ -80,7 +82,8 @@ def from_log(log: Log) -> Measurements:
     vel = None
     if log.velocity is not None and len(log.velocity.t):
         vel = (log.velocity.t, np.stack([log.velocity.v, log.velocity.omega], -1))
-    return Measurements(log.t_start, wheel, gyro, gps, ranges, vel, tuple(notes))
+    rid = None if ranges is None else np.asarray(log.ranges.beacon)
+    return Measurements(log.t_start, wheel, gyro, gps, ranges, vel, tuple(notes), rid)
 
 
 def slip_intensity(process, meas: Measurements) -> np.ndarray:

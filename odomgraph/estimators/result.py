@@ -47,6 +47,14 @@ class Estimate:
     the estimator solved it (None: equal to calibration_cov)."""
     observability: "Observability | None" = None
     """What the log determines about the scale factors (estimators.observability)."""
+    rejected: dict[str, int] = field(default_factory=dict)
+    """Measurements rejected per sensor (the EKF's gate, a smoother's robust loss at weight ~0)."""
+    downweighted: dict[str, int] = field(default_factory=dict)
+    """Measurements a robust loss kept at reduced weight, per sensor."""
+    used: dict[str, int] = field(default_factory=dict)
+    """Measurements offered to the estimator, per sensor."""
+    recoveries: list[str] = field(default_factory=list)
+    """Each time the estimator caught itself diverging and recovered, with when and how."""
     warnings: list[str] = field(default_factory=list)
     """One line each: what the user must know to trust the result (unobservable
     parameters, rejected measurements, a hit iteration cap, ...)."""

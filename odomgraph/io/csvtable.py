@@ -74,7 +74,8 @@ def read_table(path: Path, required: tuple[str, ...], optional: tuple[str, ...] 
     or, with ``equal_times``, never decrease (ranges.csv: several beacons may
     share a time stamp). Columns in ``text_columns`` are returned as arrays of
     str. Unknown extra columns are allowed and ignored. The arrays carry file
-    line numbers in the special key ``"_line"`` for later error messages.
+    line numbers in the special key ``"_line"`` for later error messages, and
+    ``"_duplicates"`` counts exact repeats of the row before, which are dropped.
     """
     path = Path(path)
     text = read_text(path)
@@ -101,8 +102,15 @@ def read_table(path: Path, required: tuple[str, ...], optional: tuple[str, ...] 
     for f, ln in zip(fields, lines):
         if len(f) != ncol:
             raise LogFormatError(path, f"expected {ncol} fields, found {len(f)}", ln)
+    # A row written twice (same stamp, same values) is a logging fault that
+    # carries no conflicting information: drop the copy and count it.
+    dup = [k for k in range(1, len(rows)) if rows[k] == rows[k - 1]]
+    if dup:
+        drop = set(dup)
+        fields = [f for k, f in enumerate(fields) if k not in drop]
+        lines = [ln for k, ln in enumerate(lines) if k not in drop]
     lines_arr = np.asarray(lines, dtype=np.int64)
-    out: dict[str, np.ndarray] = {"_line": lines_arr}
+    out: dict[str, np.ndarray] = {"_line": lines_arr, "_duplicates": np.asarray(len(dup))}
     for name in (*required, *optional):
         if name not in header:
             continue

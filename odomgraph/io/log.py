@@ -13,7 +13,8 @@ from pathlib import Path
 import numpy as np
 
 from odomgraph.errors import LogFormatError
-from odomgraph.io.csvtable import header_of, read_table, read_text, shown, text_lines, write_table
+from odomgraph.io.csvtable import header_of, read_text, shown, text_lines, write_table
+from odomgraph.io.csvtable import read_table as _read_table
 from odomgraph.io.geodesy import latlon_to_local
 from odomgraph.io.outdir import atomic_output_dir
 from odomgraph.io.robot import RobotConfig, load_robot, robot_toml
@@ -103,6 +104,8 @@ class Log:
     """(scale_left, scale_right, scale_track) where known."""
     path: Path | None = None
     notes: tuple[str, ...] = field(default=())
+    warnings: tuple[str, ...] = field(default=())
+    """What reading the files repaired (duplicated rows dropped), one line each."""
 
     @property
     def t_start(self) -> float:
@@ -144,6 +147,12 @@ def read_log(directory: Path | str) -> Log:
         raise LogFormatError(d, "log directory does not exist")
     robot = load_robot(d / "robot.toml")
     enc = ws = gps = gyro = rng = vel = truth = None
+    dups: dict[str, int] = {}
+
+    def read_table(p, *a, **k):
+        c = _read_table(p, *a, **k)
+        dups[p.name] = int(c["_duplicates"])
+        return c
     if _optional(d / "encoders.csv") and _optional(d / "wheel_speeds.csv"):
         raise LogFormatError(d, "has both encoders.csv and wheel_speeds.csv; they are alternatives "
                                 "(LOG_FORMAT.md): keep the one to use")
@@ -160,7 +169,7 @@ def read_log(directory: Path | str) -> Log:
     if enc is None and ws is None:
         raise LogFormatError(d / "encoders.csv", "file is missing (a log needs encoders.csv or wheel_speeds.csv)")
     if (p := _optional(d / "gps.csv")):
-        gps = _read_gps(p, robot)
+        gps = _read_gps(p, robot, read_table)
     if (p := _optional(d / "gyro.csv")):
         c = read_table(p, ("t", "omega"))
         gyro = Gyro(c["t"], c["omega"])
@@ -197,7 +206,9 @@ def read_log(directory: Path | str) -> Log:
             raise LogFormatError(p, "scale factors must be numbers") from None
         if not all(np.isfinite(scales)) or min(scales) <= 0:
             raise LogFormatError(p, f"scale factors must be positive finite numbers, got {list(scales)}")
-    log = Log(robot, enc, ws, gps, gyro, rng, vel, truth, scales, path=d)
+    warn = tuple(f"{name}: {int(n)} row(s) written twice (same stamp and values) were read once"
+                 for name, n in dups.items() if n)
+    log = Log(robot, enc, ws, gps, gyro, rng, vel, truth, scales, path=d, warnings=warn)
     check_log(log)
     return log
 
@@ -226,7 +237,9 @@ def check_magnitudes(log: Log) -> None:
         e = log.encoders
         dt = np.diff(e.t)
         tpm = min(r.ticks_per_meter_left, r.ticks_per_meter_right)
-        speed = np.maximum(np.abs(e.ticks_left[1:]), np.abs(e.ticks_right[1:])) / (tpm * dt)
+        ticks = np.maximum(np.abs(e.ticks_left[1:]), np.abs(e.ticks_right[1:]))
+        # dt = 0 only for a row written twice, which reading drops
+        speed = np.where(dt > 0, ticks / (tpm * np.where(dt > 0, dt, 1.0)), 0.0)
         checks.append(("encoders.csv", np.concatenate([[0.0], speed]), MAX_SPEED, "a wheel speed of", "m/s"))
     if log.wheel_speeds is not None:
         w = log.wheel_speeds
@@ -337,7 +350,7 @@ def check_clock(log: Log) -> None:
                                                   "the files of a log share one clock and unit (seconds)")
 
 
-def _read_gps(p: Path, robot: RobotConfig) -> Gps:
+def _read_gps(p: Path, robot: RobotConfig, read_table=_read_table) -> Gps:
     cols = header_of(p)
     if "lat" in cols or "lon" in cols:
         c = read_table(p, ("t", "lat", "lon"), optional=("sigma",))

@@ -93,6 +93,9 @@ class Scenario:
     """The schedule this scenario was designed for [s]."""
     write_initial: bool = False
     """Write the true start pose as robot.toml [initial] (else estimators initialise from data)."""
+    holds: tuple[tuple[float, float], ...] = ()
+    """(start, end) windows [s] in which the robot is held still whatever the
+    commands say (a stall: with slip events, the wheels spin in place)."""
 
     def with_(self, **changes) -> "Scenario":
         return replace(self, **changes)

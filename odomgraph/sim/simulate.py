@@ -31,6 +31,9 @@ def _commands(sc: Scenario, t: np.ndarray):
     k = np.minimum(np.searchsorted(np.asarray(ends), t, side="right"), len(segs) - 1)
     v = np.asarray([s.v for s in segs])[k]
     w = np.asarray([s.omega for s in segs])[k]
+    for a, b in sc.holds:
+        held = (t >= a) & (t <= b)
+        v, w = np.where(held, 0.0, v), np.where(held, 0.0, w)
     return v, w
 
 
