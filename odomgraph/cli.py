@@ -230,6 +230,8 @@ def _print_summary(s: dict) -> None:
         typer.echo(f"  range bias {b:<8} {v['value']:+.3f} ± {v['sigma']:.3f} m")
     for n in s["notes"]:
         typer.echo(f"  note: {n}")
+    why = "; ".join(s.get("status_reasons", []))
+    typer.echo(f"  status: {s['status']}" + (f" ({why})" if why else ""))
     for w in s.get("warnings", []):
         typer.echo(f"odomgraph: warning: {' '.join(str(w).split())}", err=True)
 

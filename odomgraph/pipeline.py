@@ -102,6 +102,12 @@ def warnings_of(est: Estimate) -> list[str]:
     estimator's own warnings, then each scale combination the log does not
     determine."""
     out = list(est.warnings)
+    for s, n in est.rejected.items():
+        used = est.used.get(s)
+        of = f" of {used}" if used else ""
+        out.append(f"{s}: {n}{of} measurements rejected as outliers")
+    for r in est.recoveries:
+        out.append(f"{est.method} recovered at {r}")
     unobs = est.unobservable()
     pinned = est.observability.unobservable if est.observability else {}
     for name, reason in unobs.items():
@@ -113,6 +119,32 @@ def warnings_of(est: Estimate) -> list[str]:
             out.append(f"{' and '.join(rest)} are estimated relative to the nominal common wheel scale "
                        "(summary.json scale_combinations)")
     return out
+
+
+#: A sensor losing more than this share of its measurements to the gate or the
+#: robust loss makes the run "degraded".
+DEGRADED_REJECTED = 0.2
+
+
+def status_of(est: Estimate) -> tuple[str, list[str]]:
+    """("ok" | "recovered" | "degraded", the reasons): recovered when the
+    estimator caught itself diverging and recovered; degraded when it hit an
+    iteration cap, recovered many times, or lost more than DEGRADED_REJECTED
+    of a sensor's measurements."""
+    why = []
+    for s, n in est.rejected.items():
+        used = est.used.get(s)
+        if used and n / used > DEGRADED_REJECTED:
+            why.append(f"{s}: {n} of {used} measurements rejected")
+    if any("iteration cap" in w for w in est.warnings):
+        why.append("an iteration cap was hit")
+    if len(est.recoveries) > 5:
+        why.append(f"{len(est.recoveries)} recoveries")
+    if why:
+        return "degraded", why
+    if est.recoveries:
+        return "recovered", [f"{len(est.recoveries)} recovery(ies)"]
+    return "ok", []
 
 
 def summary(est: Estimate, log: Log, schedule: Schedule) -> dict:
@@ -134,6 +166,12 @@ def summary(est: Estimate, log: Log, schedule: Schedule) -> dict:
         "scale_combinations": combinations_of(est.mean[-1, 8:11], est.scale_cov(given=True)),
         **({"range_bias": est.range_bias} if est.range_bias is not None else {}),
         "nis": nis_summary(est),
+        "status": status_of(est)[0],
+        "status_reasons": status_of(est)[1],
+        "rejected": est.rejected,
+        "downweighted": est.downweighted,
+        "used": est.used,
+        "recoveries": est.recoveries,
         "warnings": list(log.warnings) + warnings_of(est),
         "notes": est.notes,
     }

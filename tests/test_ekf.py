@@ -132,10 +132,14 @@ def test_gate_rejects_gps_outliers(paper_log):
     x[::50] += 25.0  # 2 % gross errors
     bad = paper_log.with_(gps=Gps(g.t, x, g.y))
     from odomgraph.estimators.ekf import EKFOptions
-    gated = EKF(bad, Schedule(20.0), EKFOptions(gate=16.0)).run()
-    err = truth_errors(gated, bad)
-    assert err.rms_position_m < 0.05
-    assert any("rejected by the gate" in n for n in gated.notes)
+    for opt in (EKFOptions(gate=16.0), EKFOptions()):          # an explicit gate, and the default one
+        gated = EKF(bad, Schedule(20.0), opt).run()
+        err = truth_errors(gated, bad)
+        assert err.rms_position_m < 0.05
+        # every outlier after the start rejected, and (nearly) nothing else
+        n_bad = int(np.sum(g.t[::50] >= gated.t[0]))
+        assert n_bad <= gated.rejected["gps"] <= n_bad + 3, (gated.rejected, n_bad)
+        assert gated.recoveries == []
 
 
 def test_divergence_is_detected_not_returned_as_nan(paper_log):

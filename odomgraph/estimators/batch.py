@@ -1,4 +1,4 @@
-"""Batch smoother: Levenberg-Marquardt over the whole log, on GTSAM's elimination.
+"""Batch smoother: Gauss-Newton over the whole log, on GTSAM's elimination.
 
 Why not GTSAM's own LevenbergMarquardtOptimizer with CustomFactors: inside
 GTSAM's optimisers every Python callback receives a copy of the whole Values,
@@ -26,7 +26,7 @@ from factors.motion import propagate
 from odomgraph import state as S
 from odomgraph.checks import bounded, check_fields
 from odomgraph.errors import EstimatorDivergedError
-from odomgraph.estimators.graph import NB, Linearization, Problem, linearize
+from odomgraph.estimators.graph import NB, Linearization, Problem, linearize, robust_counts
 from odomgraph.estimators.initial import initial_state
 from odomgraph.estimators.keyframes import build_keyframes
 from odomgraph.estimators.measurements import from_log, slip_intensity
@@ -42,11 +42,17 @@ class SmootherOptions:
     """Keyframe rate [Hz] (at most the encoder rate); slip is resolved at this rate."""
     max_iterations: int = bounded(50, ge=1, integer=True)
     rel_tol: float = bounded(1e-7, gt=0, lt=1)
-    """Stop when the cost decreases by less than this fraction."""
-    robust: str | None = bounded(None, choices=("huber", "cauchy"), optional=True)
-    """Robust loss of GPS fixes and ranges: "huber", "cauchy" or None (Gaussian)."""
+    """Stop when the cost decreases by less than this fraction,"""
+    abs_tol: float = bounded(0.01, gt=0)
+    """or by less than this much (cost = half the sum of whitened squares): a
+    chi-square change of 0.02 moves no estimate by a noticeable part of its
+    sigma, and the tight scale-factor chain otherwise crawls on for dozens of
+    iterations in its flat valley."""
+    robust: str | None = bounded("cauchy", choices=("huber", "cauchy", "none"), optional=True)
+    """Robust loss of GPS fixes and ranges: "cauchy" (default), "huber", or
+    "none" (Gaussian). Real logs have outliers, some in the first seconds."""
     robust_k: float | None = bounded(None, gt=0, optional=True)
-    """Its threshold in sigmas (None: the loss's 95 %-efficiency default)."""
+    """Its threshold in sigmas (None: 5 for Cauchy, 1.345 for Huber; graph.ROBUST_K)."""
     slip_cauchy: float | None = bounded(0.005, gt=0, optional=True)
     """Cauchy scale [m/s] of the sparse zero-slip prior outside the calibration
     window (the whole log with ``calibrate_until=None``). None: no prior there,
@@ -92,7 +98,8 @@ def build_problem(log: Log, schedule: Schedule, options: SmootherOptions, causal
     if options.range_bias and not (kf.rng_k.size and log.robot.beacons):
         from odomgraph.errors import OdomgraphError
         raise OdomgraphError("--range-bias: the log has no ranges to estimate a bias from")
-    return Problem(kf, log.robot, mean, cov, zero, robust, slip_intensity(log.robot.process, meas), options.robust,
+    loss = None if options.robust in (None, "none") else options.robust
+    return Problem(kf, log.robot, mean, cov, zero, robust, slip_intensity(log.robot.process, meas), loss,
                    options.robust_k, options.range_bias_sigma if options.range_bias else None,
                    options.velocity_loss, init=init)
 
@@ -113,6 +120,115 @@ def initial_guess(prob: Problem, ekf: Estimate) -> tuple[np.ndarray, np.ndarray]
     for j, i in enumerate(range(S.V, S.N)):
         W[:, j] = np.interp(mid, ekf.t, m[:, i])
     W[:, 5:8] = m[-1, S.SCALE]
+    return pose, W
+
+
+#: Length of the pieces of dead reckoning aligned one by one to the fixes [s].
+GUESS_CHUNK = 15.0
+#: GNC: the robust threshold starts at 2^GNC_STEPS times its target and halves each iteration.
+GNC_STEPS = 5
+
+
+def robust_initial_guess(prob: Problem, meas) -> tuple[np.ndarray, np.ndarray]:
+    """Keyframe estimate of the batch's own, needing no filter to survive.
+
+    Dead reckoning with the nominal parameters from the initial pose (the
+    consensus start, initial.consensus_pose), cut into GUESS_CHUNK pieces,
+    each moved by the rigid map most of its fixes agree with (RANSAC, then
+    weighted least squares; initial.rigid_ransac), so that the guess stays
+    near the truth however the nominal scale factors drift. Velocities are the
+    wheels' (nominal), slip and bias zero, scale factors at the prior. A piece
+    with too few fixes keeps the previous piece's map (an outage), and a log
+    without fixes is plain dead reckoning.
+    """
+    from factors.motion import integrate
+    from odomgraph.estimators.initial import _range_fixes, rigid_fit, rigid_ransac
+    kf, r = prob.kf, prob.robot
+    v = kf.enc_m.mean(1)
+    w = (kf.enc_m[:, 1] - kf.enc_m[:, 0]) / r.track_width
+    dr = integrate(v, w, kf.dt, start=tuple(prob.prior_mean[0:3]))
+    W = np.zeros((kf.n, 8))
+    W[:-1, 0], W[:-1, 1] = v, w
+    W[-1] = W[-2]
+    W[:, 5:8] = prob.prior_mean[8:11]
+    W[:, 2] = prob.prior_mean[S.BIAS]
+    fixes = None
+    if meas.gps is not None:
+        fixes = (*meas.gps, np.asarray(r.gps_lever_arm, float))
+    elif meas.ranges is not None:
+        rf = _range_fixes(meas, r, limit=None)
+        if rf is not None:
+            fixes = (rf[0], rf[1], rf[2], np.asarray(r.range_lever_arm, float))
+    pose = dr.copy()
+    if fixes is None:
+        pose[:, 2] = wrap_angle(pose[:, 2])
+        return pose, W
+    ft, fp, fs, lever = fixes
+    th_f = np.interp(ft, kf.t, dr[:, 2])
+    d = np.stack([np.interp(ft, kf.t, dr[:, 0]) + np.cos(th_f) * lever[0] - np.sin(th_f) * lever[1],
+                  np.interp(ft, kf.t, dr[:, 1]) + np.sin(th_f) * lever[0] + np.cos(th_f) * lever[1]], -1)
+    edges = np.arange(kf.t[0], kf.t[-1] + GUESS_CHUNK, GUESS_CHUNK)
+    phi, c = 0.0, np.zeros(2)
+    for a, b in zip(edges[:-1], edges[1:]):
+        sel = (ft >= a) & (ft < b)
+        if sel.sum() >= 6:
+            travel = float(np.sum(np.abs(v[(kf.t[:-1] >= a) & (kf.t[:-1] < b)]) * GUESS_CHUNK / max(1, sel.sum())))
+            thr = 3.4 * fs[sel] + 0.1 * max(travel, 1.0)
+            ph, cx, cy, inl, best = rigid_ransac(d[sel], fp[sel], thr)
+            keep = inl[best]
+            if keep.sum() >= 5 and np.ptp(d[sel][keep], 0).max() > 3.0 * float(np.median(fs[sel])):
+                phi, c = rigid_fit(d[sel][keep], fp[sel][keep], 1.0 / fs[sel][keep] ** 2)
+        k = (kf.t >= a) & (kf.t < b + (1e-9 if b >= edges[-1] else 0.0))
+        cp, sp = np.cos(phi), np.sin(phi)
+        pose[k, 0] = cp * dr[k, 0] - sp * dr[k, 1] + c[0]
+        pose[k, 1] = sp * dr[k, 0] + cp * dr[k, 1] + c[1]
+        pose[k, 2] = dr[k, 2] + phi
+    pose[:, 2] = wrap_angle(pose[:, 2])
+    return pose, W
+
+
+#: Growing-window start: each solve covers this much history [s], advancing by GROW_STEP.
+GROW_WINDOW = 30.0
+GROW_STEP = 10.0
+#: Prior 1-sigma on the first keyframe of each later window, block order (a
+#: soft hand-over: the full solve afterwards does the exact job).
+_GROW_SIGMA = np.array([0.05, 0.05, 0.02, 0.1, 0.1, 0.01, 0.1, 0.1, 0.01, 0.01, 0.01])
+
+
+def growing_window_guess(prob: Problem, meas) -> tuple[np.ndarray, np.ndarray]:
+    """Keyframe estimate by solving a window that grows through the log.
+
+    Starts from robust_initial_guess; then solves the first GROW_STEP
+    seconds, extends by GROW_STEP at a time, filling the new keyframes by
+    dead reckoning from the last solved one with its scale factors and slip,
+    and solves the last GROW_WINDOW seconds again (Gauss-Newton with GNC,
+    solve_window) with a soft prior where each window starts. Every solve
+    starts near its answer, so no part of the log can drag the rest into a
+    wrong minimum (ESTIMATION-NOTES.md: started from dead reckoning with wrong
+    scale factors, a whole-log solve converged to scale factors x5).
+    """
+    from factors.encoder import body_velocity
+    pose, W = robust_initial_guess(prob, meas)
+    kf, r = prob.kf, prob.robot
+    L = np.diag(1.0 / _GROW_SIGMA)
+    done = 0
+    while done < kf.n - 1:
+        k1 = int(min(kf.n - 1, max(done + 2, np.searchsorted(kf.t, kf.t[done] + GROW_STEP))))
+        if done > 0:
+            # New keyframes: dead reckoning from the last solved one, with its parameters.
+            w = W[done]
+            v, om = body_velocity(kf.enc_m[done:k1, 0], kf.enc_m[done:k1, 1], w[3], w[4], w[5], w[6], w[7],
+                                  r.track_width)
+            from factors.motion import integrate
+            pose[done:k1 + 1] = integrate(v, om, kf.dt[done:k1], start=tuple(pose[done]))
+            pose[done:k1 + 1, 2] = wrap_angle(pose[done:k1 + 1, 2])
+            W[done + 1:k1 + 1] = w
+            W[done:k1, 0], W[done:k1, 1] = v, om
+        k0 = int(np.searchsorted(kf.t, kf.t[k1] - GROW_WINDOW))
+        k0 = min(k0, done)
+        prior = None if k0 == 0 else (pose[k0].copy(), W[k0].copy(), L)
+        pose, W, _ = solve_window(prob, pose, W, k0, k1, prior, max_iterations=15)
+        done = k1
     return pose, W
 
 
@@ -173,8 +289,14 @@ def retract(pose: np.ndarray, W: np.ndarray, d: np.ndarray):
 def solve(prob: Problem, pose: np.ndarray, W: np.ndarray, options: SmootherOptions, progress=None):
     """Gauss-Newton with a backtracking line search.
 
-    Returns (pose, W, iterations, cost, range_bias); range_bias is None
-    unless the problem estimates it.
+    Returns (pose, W, iterations, cost, range_bias, converged); range_bias
+    is None unless the problem estimates it; converged is False when the
+    iteration cap stopped it.
+
+    With a robust loss the threshold is graduated (GNC): it starts at
+    2^GNC_STEPS times its target, so that every residual sits in the loss's
+    nearly quadratic part and a start far from the answer cannot mistake good
+    fixes for outliers, and halves each iteration to its target.
 
     Not Levenberg-Marquardt with Marquardt damping: the scale factors are
     per-keyframe copies tied by very tight random-walk factors, so diag(A^T A)
@@ -186,11 +308,18 @@ def solve(prob: Problem, pose: np.ndarray, W: np.ndarray, options: SmootherOptio
     n, nb = prob.kf.n, prob.n_bias
     order = time_ordering(n, 1 if nb else 0)
     rb = np.zeros(nb) if nb else None
+    gnc = prob.robust is not None
+    prob.gnc_scale = 2.0**GNC_STEPS if gnc else 1.0
     lin = linearize(prob, pose, W, range_bias=rb)
     it = 0
+    converged = False
     for it in range(1, options.max_iterations + 1):
         if progress is not None:
             progress(it, options.max_iterations)
+        if gnc and prob.gnc_scale > 1.0 and it > 1:
+            # Graduated non-convexity: tighten the loss, then linearise again at the same point.
+            prob.gnc_scale = max(1.0, 0.5 * prob.gnc_scale)
+            lin = linearize(prob, pose, W, range_bias=rb)
         vv = gaussian_graph(prob, lin).optimize(order, gtsam.EliminateQR)
         d = np.stack([vv.at(k) for k in range(n)])
         db = vv.at(n) if nb else None
@@ -205,12 +334,97 @@ def solve(prob: Problem, pose: np.ndarray, W: np.ndarray, options: SmootherOptio
                 break
             alpha *= 0.5
         if lin_n.cost > lin.cost:
-            break  # no descent left along the Gauss-Newton direction: converged
-        decrease = (lin.cost - lin_n.cost) / max(lin.cost, 1e-300)
+            if prob.gnc_scale <= 1.0:
+                converged = True
+                break  # no descent left along the Gauss-Newton direction: converged
+            continue
+        drop = lin.cost - lin_n.cost
+        decrease = drop / max(lin.cost, 1e-300)
         pose, W, rb, lin = pose_n, W_n, rb_n, lin_n
-        if decrease < options.rel_tol:
+        if (decrease < options.rel_tol or drop < options.abs_tol) and prob.gnc_scale <= 1.0:
+            converged = True
             break
-    return pose, W, it, lin.cost, rb
+    prob.gnc_scale = 1.0
+    return pose, W, it, lin.cost, rb, converged
+
+
+def block_local(pose0: np.ndarray, W0: np.ndarray, pose: np.ndarray, W: np.ndarray) -> np.ndarray:
+    """(11,) tangent from (pose0, W0) to (pose, W), block order: the pose part in
+    pose0's body frame (Pose2 local coordinates), the rest as differences."""
+    d = np.empty(NB)
+    d[0:3] = gtsam.Pose2(*pose0).localCoordinates(gtsam.Pose2(*pose))
+    d[3:] = W - W0
+    return d
+
+
+def solve_window(prob: Problem, pose: np.ndarray, W: np.ndarray, k0: int, k1: int, prior=None,
+                 max_iterations: int = 30, rel_tol: float = 1e-9):
+    """Gauss-Newton with a line search over keyframes k0..k1 only (the intervals
+    between them), as ``solve`` does for the whole log. The incremental
+    smoothers use it to recover: their factors, linearised once at a
+    prediction, can leave the estimate in a basin that many iterations with
+    the robust losses re-weighted each time get out of.
+
+    ``prior`` = (pose0 (3,), W0 (8,), L (11, 11)): a Gaussian on keyframe k0
+    with whitener L in block order, e.g. an ISAM2 marginal; None with k0 = 0
+    uses the problem's own prior. Returns (pose, W) with keyframes k0..k1
+    updated, and the iterations used.
+    """
+    n_w = k1 - k0 + 1
+    order = time_ordering(n_w)
+    pose, W = pose.copy(), W.copy()
+    gnc = prob.robust is not None
+    prob.gnc_scale = 2.0**GNC_STEPS if gnc else 1.0       # graduated non-convexity, as in solve
+
+    def lin_at(pose, W):
+        lin = linearize(prob, pose, W, k0, k1)
+        extra = 0.0
+        Ap = bp = None
+        if prior is not None:
+            p0, w0, L = prior
+            r = L @ block_local(p0, w0, pose[k0], W[k0])
+            Ap, bp = L, -r
+            extra = 0.5 * float(r @ r) - (0.5 * float(lin.b_p @ lin.b_p) if k0 == 0 else 0.0)
+        elif k0 == 0:
+            Ap, bp = lin.A_p, lin.b_p
+        return lin, Ap, bp, lin.cost + extra
+
+    lin, Ap, bp, cost = lin_at(pose, W)
+    it = 0
+    for it in range(1, max_iterations + 1):
+        if gnc and prob.gnc_scale > 1.0 and it > 1:
+            prob.gnc_scale = max(1.0, 0.5 * prob.gnc_scale)
+            lin, Ap, bp, cost = lin_at(pose, W)
+        A1, A2, b = _factor_arrays(prob, lin)
+        g = gtsam.GaussianFactorGraph()
+        unit = gtsam.noiseModel.Unit.Create(A1.shape[1])
+        for j in range(n_w - 1):
+            g.add(gtsam.JacobianFactor(j, A1[j], j + 1, A2[j], b[j], unit))
+        if Ap is not None:
+            g.add(gtsam.JacobianFactor(0, Ap, bp, gtsam.noiseModel.Unit.Create(len(bp))))
+        vv = g.optimize(order, gtsam.EliminateQR)
+        d = np.stack([vv.at(j) for j in range(n_w)])
+        if not np.all(np.isfinite(d)):
+            raise EstimatorDivergedError("window re-solve: non-finite step")
+        alpha = 1.0
+        while True:
+            p_n, W_n = pose.copy(), W.copy()
+            p_n[k0:k1 + 1], W_n[k0:k1 + 1] = retract(pose[k0:k1 + 1], W[k0:k1 + 1], alpha * d)
+            lin_n, Ap_n, bp_n, cost_n = lin_at(p_n, W_n)
+            if cost_n <= cost or alpha < 1e-3:
+                break
+            alpha *= 0.5
+        if cost_n > cost:
+            if prob.gnc_scale <= 1.0:
+                break
+            continue
+        decrease = (cost - cost_n) / max(cost, 1e-300)
+        drop = cost - cost_n
+        pose, W, lin, Ap, bp, cost = p_n, W_n, lin_n, Ap_n, bp_n, cost_n
+        if (decrease < rel_tol or drop < 0.01) and prob.gnc_scale <= 1.0:
+            break
+    prob.gnc_scale = 1.0
+    return pose, W, it
 
 
 def marginal_blocks(prob: Problem, pose: np.ndarray, W: np.ndarray, range_bias: np.ndarray | None = None):
@@ -312,17 +526,31 @@ def keyframe_rows(prob: Problem, pose: np.ndarray, W: np.ndarray, Sig: np.ndarra
 
 def run_batch(log: Log, schedule: Schedule = Schedule(), options: SmootherOptions = SmootherOptions(),
               progress=None, initial: Estimate | None = None) -> Estimate:
-    """Smooth the whole log. Starts from ``initial``, an EKF estimate of the same
-    log, or runs the EKF for it (same schedule; 20 s when there is none)."""
-    from odomgraph.estimators.ekf import run_ekf
+    """Smooth the whole log, from its own robust start (robust_initial_guess),
+    or from ``initial``, an estimate of the same log (the Monte-Carlo study
+    passes the EKF's, which it has anyway)."""
     wall0 = time.perf_counter()
     prob = build_problem(log, schedule, options)
-    ekf_schedule = schedule if schedule.calibrate_until is not None else Schedule(20.0)
-    ekf = initial if initial is not None else run_ekf(log, ekf_schedule)
-    pose, W = initial_guess(prob, ekf)
+    if initial is None:
+        # The EKF is one candidate start: robust itself (a consensus start, a
+        # gate that re-acquires), and cheap. If it fails, the batch does not.
+        from odomgraph.errors import OdomgraphError
+        from odomgraph.estimators.ekf import run_ekf
+        try:
+            initial = run_ekf(log, schedule if schedule.calibrate_until is not None else Schedule(20.0))
+        except (OdomgraphError, ArithmeticError, np.linalg.LinAlgError):
+            initial = None
+        if initial is not None and initial.recoveries:
+            initial = None          # the filter went through a rough patch: do not start there
+    if initial is not None:
+        pose, W = initial_guess(prob, initial)
+        start = f"started from the {initial.method} estimate"
+    else:
+        pose, W = growing_window_guess(prob, from_log(log))
+        start = "started from a growing-window solve (the EKF failed or had to recover)"
     if options.wheel_speed_units:
         prob.speed_ref = W[0, 5:8].copy()   # the units of the random walks (graph.linearize)
-    pose, W, iters, cost, rb = solve(prob, pose, W, options, progress)
+    pose, W, iters, cost, rb, converged = solve(prob, pose, W, options, progress)
     if not (np.all(np.isfinite(pose)) and np.all(np.isfinite(W))):
         raise EstimatorDivergedError("batch smoother diverged: non-finite estimate")
     Sig = marginal_blocks(prob, pose, W, rb)
@@ -343,9 +571,22 @@ def run_batch(log: Log, schedule: Schedule = Schedule(), options: SmootherOption
     est.calibration_cov_given = given
     est.observability = prob.init.observability
     est.warnings = list(prob.init.warnings)
-    est.notes = [f"batch: {prob.kf.n} keyframes at {options.keyframe_hz:g} Hz, {iters} LM iterations, "
-                 f"final cost {cost:.1f}"] + list(ekf.notes)
+    est.notes = [f"batch: {prob.kf.n} keyframes at {options.keyframe_hz:g} Hz, {iters} Gauss-Newton iterations, "
+                 f"final cost {cost:.1f}; {start}", prob.init.note]
+    if not converged:
+        est.warnings.append(f"batch: stopped at its iteration cap ({options.max_iterations} Gauss-Newton "
+                            "iterations) before converging; the estimate may not be the optimum")
+    est.rejected, est.downweighted = robust_counts(prob, pose, W)
+    est.used = measurement_counts(prob)
     return est
+
+
+def measurement_counts(prob: Problem) -> dict[str, int]:
+    """Measurements per sensor the smoother used (encoder and gyro/velocity as interval means)."""
+    kf = prob.kf
+    out = {"encoders": kf.n - 1, "gyro": int(np.sum(kf.gyro_n)), "velocity": int(np.sum(kf.vel_n)),
+           "gps": int(kf.gps_k.size), "ranges": int(kf.rng_k.size)}
+    return {k: v for k, v in out.items() if v}
 
 
 def _n_measurements(prob: Problem) -> int:

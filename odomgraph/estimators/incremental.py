@@ -38,8 +38,9 @@ from odomgraph import state as St
 from odomgraph.checks import bounded
 from odomgraph.errors import EstimatorDivergedError
 from odomgraph.estimators.batch import (SmootherOptions, _factor_arrays, _n_measurements, build_problem,
-                                        honest_blocks, keyframe_rows, marginal_blocks, retract)
-from odomgraph.estimators.graph import NB, Problem, linearize
+                                        honest_blocks, keyframe_rows, marginal_blocks, measurement_counts, retract,
+                                        solve_window)
+from odomgraph.estimators.graph import NB, Problem, linearize, robust_counts
 from odomgraph.estimators.measurements import from_log
 from odomgraph.estimators.result import Estimate
 from odomgraph.estimators.schedule import Schedule
@@ -72,6 +73,11 @@ class IncrementalOptions(SmootherOptions):
     """Age [s] at which an interval's linear factors are linearised again, at
     the by then nearly final estimate (they were first linearised at a
     prediction). 0 disables."""
+    recovery_window: float = bounded(20.0, gt=0)
+    """Seconds of history re-solved when the divergence watch trips (at most
+    back to the current segment's start; fixed-lag: its window)."""
+    max_recoveries: int = bounded(50, ge=0, integer=True)
+    """Recoveries allowed in one run before the estimator gives up and says so."""
     max_mean_residual: float = bounded(50.0, gt=0, infinite=True)
     """Diverged when the running mean (about the last 50) of the whitened squared
     post-fit residuals of GPS fixes or ranges exceeds this many times their
@@ -184,7 +190,8 @@ class _Runner:
             raise OdomgraphError(f"{self.method}: range biases and a robust velocity random walk are "
                                  "batch-smoother options")
         self.log, self.schedule, self.options = log, schedule, options
-        self._ema = {"GPS fixes": [2.0, 0, 2], "ranges": [1.0, 0, 1]}   # _watch: running mean, count, dof
+        # _watch: per sensor [slow running mean, count, dof, fast running mean]
+        self._ema = {"GPS fixes": [2.0, 0, 2, 2.0], "ranges": [1.0, 0, 1, 1.0]}
         # causal: the online row of interval k is produced at t_{k+1} from data up to t_{k+1}
         self.prob = build_problem(log, schedule, options, causal=True)
         self.graph = _Graph(self.prob, options)
@@ -194,6 +201,8 @@ class _Runner:
         self.pose[0] = self.prob.prior_mean[0:3]
         self.W[0] = self.prob.prior_mean[3:]
         self.update_times = np.zeros(n)
+        self.recoveries: list[str] = []
+        self._recovered_at: list[float] = []
 
     def _new_keyframe(self, k: int) -> None:
         """Predict keyframe k from k-1 (its initial value)."""
@@ -222,7 +231,9 @@ class _Runner:
             self.update_times[k] = time.perf_counter() - t0
             if not (np.all(np.isfinite(self.pose[k])) and np.all(np.isfinite(self.W[k]))):
                 raise EstimatorDivergedError(f"{self.method} diverged at t={kf.t[k]:.3f} s: non-finite estimate")
-            self._watch(k - 1)
+            reason = self._watch(k - 1)
+            if reason is not None:
+                self._trip(k, reason)
             if progress is not None and k % stride == 0:
                 progress(k, n)
         est = self.finish()
@@ -231,6 +242,9 @@ class _Runner:
         t0 = from_log(self.log).t_start
         est.t_switch = None if self.schedule.calibrate_until is None else t0 + self.schedule.calibrate_until
         est.update_times = self.update_times[1:]
+        est.recoveries = list(self.recoveries)
+        est.rejected, est.downweighted = robust_counts(self.prob, self.pose, self.W)
+        est.used = measurement_counts(self.prob)
         est.observability = self.prob.init.observability
         est.warnings = list(self.prob.init.warnings)
         return est
@@ -261,15 +275,43 @@ class _Runner:
         limit = self.options.max_mean_residual
         for name, values in checks:
             e = self._ema[name]
-            for u in np.minimum(values, 10.0 * limit * e[2]):    # one gross outlier cannot trip it
-                e[0] = 0.98 * e[0] + 0.02 * u
+            for u in values:
+                # slow: about the last 50; one gross outlier is clipped so it cannot trip it
+                e[0] = 0.98 * e[0] + 0.02 * min(u, 10.0 * limit * e[2])
+                # fast: about the last 3, clipped harder; it trips when several in a
+                # row are far off, which is when recovering early pays (a stall's onset)
+                e[3] = 0.7 * e[3] + 0.3 * min(u, 25.0 * e[2])
                 e[1] += 1
             if e[1] > 100 and e[0] > limit * e[2]:
-                raise EstimatorDivergedError(
-                    f"{self.method} diverged at t={kf.t[j + 1]:.3f} s: the running mean of whitened squared "
-                    f"{name} residuals is {e[0]:.0f} (expected about {e[2]}); its linear factors were linearised "
-                    "too far from the answer (e.g. nominal parameters far off). The batch smoother "
-                    "(--method batch) relinearises everything and may still work")
+                return f"the running mean of whitened squared {name} residuals is {e[0]:.0f} (expected about {e[2]})"
+            if e[1] > 5 and e[3] > FAST_WATCH * e[2]:
+                return (f"the last few {name} sit {np.sqrt(e[3] / e[2]):.1f} sigma from the estimate "
+                        "(expected about 1)")
+        return None
+
+    def _trip(self, k: int, reason: str) -> None:
+        """The watch tripped at keyframe k: re-solve the recent past and carry on,
+        or, when recovering keeps failing, say so."""
+        t = float(self.prob.kf.t[k])
+        recent = [r for r in self._recovered_at if t - r < 5.0]
+        if len(self._recovered_at) >= self.options.max_recoveries or len(recent) >= 2:
+            raise EstimatorDivergedError(
+                f"{self.method} diverged at t={t:.3f} s: {reason}, and re-solving the last "
+                f"{self.options.recovery_window * 3:g} s did not bring it back ({len(self._recovered_at)} "
+                "recoveries). The batch smoother (--method batch) relinearises everything and may still work")
+        window = self.options.recovery_window * (3.0 if recent else 1.0)
+        kf = self.prob.kf
+        j0 = self._recovery_start(k, int(np.searchsorted(kf.t, t - window)))
+        if j0 >= k:       # a segment just began: nothing of its own to re-solve yet
+            for e in self._ema.values():
+                e[0], e[1], e[3] = float(e[2]), 0, float(e[2])
+            return
+        self.recover(k, j0)
+        for e in self._ema.values():
+            e[0], e[1], e[3] = float(e[2]), 0, float(e[2])
+        self._recovered_at.append(t)
+        self.recoveries.append(f"t={t:.2f} s: {reason}; re-solved the {t - kf.t[j0]:.0f} s since t={kf.t[j0]:.2f} s "
+                               "and carried on from there")
 
 
 def _joint_marginal(isam, k: int) -> np.ndarray:
@@ -283,6 +325,10 @@ def _joint_marginal(isam, k: int) -> np.ndarray:
             C[off[a]:off[a + 1], off[c]:off[c + 1]] = jm.at(ka, kc)
     return 0.5 * (C + C.T)
 
+
+#: The fast watch trips when the recent post-fit residuals average this many
+#: times their expected whitened square (about 3.9 sigma per axis).
+FAST_WATCH = 15.0
 
 #: ISAM2 boundary tangent order (X 3, W_KEY 6, S_KEY 2) -> keyframe block order (graph.py).
 _PERM = np.array([0, 1, 2] + [3 + i for i in W_IDX] + [3 + i for i in S_IDX])
@@ -354,8 +400,15 @@ class ISAM2Runner(_Runner):
             self.pose[i] = [p.x(), p.y(), p.theta()]
             self.W[i, W_IDX] = isam.calculateEstimateVector(W_KEY(i))
             self.W[i, S_IDX] = isam.calculateEstimateVector(S_KEY(i))
-        # The causal estimate at t_k, of the state at the midpoint of the
-        # interval just completed (its averages are what the smoother knows).
+        self._online_row(k)
+        seg = self.options.segment
+        if seg > 0 and kf.t[k] - kf.t[self.seg_start] >= seg and k < kf.n - 1:
+            self._hand_over(k)
+
+    def _online_row(self, k):
+        """The causal estimate at t_k, of the state at the midpoint of the
+        interval just completed (its averages are what the smoother knows)."""
+        isam, kf = self.isam, self.prob.kf
         half = 0.5 * kf.dt[k - 1]
         p, Jf = propagate(*self.pose[k - 1], self.W[k - 1, 0], self.W[k - 1, 1], half)
         row = np.empty(St.N)
@@ -372,9 +425,74 @@ class ISAM2Runner(_Runner):
         self.online_sigma[k, 0:3] = np.sqrt(np.maximum(np.diag(Pp), 0))
         self.online_sigma[k, [3, 4, 5, 8, 9, 10]] = np.sqrt(np.maximum(np.diag(Pw), 0))
         self.online_sigma[k, [6, 7]] = np.sqrt(np.maximum(np.diag(Ps), 0))
-        seg = self.options.segment
-        if seg > 0 and kf.t[k] - kf.t[self.seg_start] >= seg and k < kf.n - 1:
-            self._hand_over(k)
+
+    # ------------------------------------------------------------ recovery
+    def _recovery_start(self, k: int, j: int) -> int:
+        return max(self.seg_start, min(j, k - 1))
+
+    def _seed(self):
+        """(factors, values, solve_window prior) that start an ISAM2 at keyframe
+        seg_start: the previous segment's hand-over marginal, or the problem's
+        prior at keyframe 0."""
+        b = self.seg_start
+        if not self.segments:
+            return (self.graph.prior_factors(self.pose, self.W), self.graph.values(0, self.pose, self.W), None)
+        seg = self.segments[-1]
+        cov_block = seg["cov"]
+        cov = cov_block[np.ix_(_PERM, _PERM)]              # back to ISAM2 order X, W, S
+        p0, w0 = _block_values(seg["vals"])
+        L = np.linalg.cholesky(np.linalg.inv(cov_block)).T
+        return (self._information_factor(seg["vals"], np.linalg.inv(cov), np.zeros(11)), gtsam.Values(seg["vals"]),
+                (p0, w0, L))
+
+    def recover(self, k: int, j0: int) -> None:
+        """Re-solve keyframes j0..k (many Gauss-Newton iterations, robust
+        weights renewed each time) and restart the ISAM2 at j0 with every
+        factor since linearised at that solution. A closed segment ends at j0,
+        so the backward pass and the memory bound are those of a hand-over."""
+        kf = self.prob.kf
+        vals = self.isam.calculateEstimate()
+        for i in range(self.seg_start, k + 1):
+            self._store(i, vals)
+        if j0 > self.seg_start:
+            bvals, cov = self._boundary(self.isam, j0)
+            self.segments.append({"k0": self.seg_start, "b": j0, "vals": bvals, "cov": _to_block(cov),
+                                  "pose": self.pose[self.seg_start:j0 + 1].copy(),
+                                  "W": self.W[self.seg_start:j0 + 1].copy()})
+            self.seg_start = j0
+        seed_factors, seed_values, prior = self._seed()
+        pose, W, _ = solve_window(self.prob, self.pose, self.W, j0, k, prior)
+        self.pose[j0:k + 1], self.W[j0:k + 1] = pose[j0:k + 1], W[j0:k + 1]
+        graph = gtsam.NonlinearFactorGraph()
+        graph.push_back(seed_factors)
+        values = gtsam.Values()
+        for i in range(j0, k + 1):
+            values.insert(self.graph.values(i, self.pose, self.W))
+        owner = [None] * graph.size()
+        for j in range(j0, k):
+            lin = self.graph.linear_factors(j, self.pose, self.W)
+            owner += [j] * lin.size()
+            graph.push_back(lin)
+            built = self.graph.builtin_factors(j)
+            owner += [None] * built.size()
+            graph.push_back(built)
+        self.isam = gtsam.ISAM2(_params(self.options, reuse_slots=True))
+        res = self.isam.update(graph, values)
+        self.linear_index = {}
+        for pos, fi in enumerate(res.getNewFactorsIndices()):
+            if owner[pos] is not None:
+                self.linear_index.setdefault(owner[pos], []).append(fi)
+        # Linearised at the re-solved estimate already: only the youngest
+        # intervals are relinearised again when they come of age.
+        age = self.options.relinearize_after
+        young = [j for j in range(j0, k) if kf.t[k] - kf.t[j + 1] < age]
+        self._relin_next = young[0] if young else k - 1
+        for i in range(j0, k + 1):
+            p = self.isam.calculateEstimatePose2(X_KEY(i))
+            self.pose[i] = [p.x(), p.y(), p.theta()]
+            self.W[i, W_IDX] = self.isam.calculateEstimateVector(W_KEY(i))
+            self.W[i, S_IDX] = self.isam.calculateEstimateVector(S_KEY(i))
+        self._online_row(k)
 
     # -------------------------------------------------------- segmentation
     def _boundary(self, isam, b):
@@ -430,47 +548,76 @@ class ISAM2Runner(_Runner):
         self._relin_next = b
         self.seg_start = b
 
-    def _smooth_segment(self, i: int, Lam_later: np.ndarray, eta_later: np.ndarray):
-        """One Gauss-Newton step over closed segment i, at the estimate it closed
-        with, given the later data's information about its last keyframe b
+    def _smooth_segment(self, i: int, Lam_later: np.ndarray, eta_later: np.ndarray, max_iterations: int = 10):
+        """Gauss-Newton over closed segment i, from the estimate it closed with,
+        given the later data's information about its last keyframe b
         (0.5 d'Lam d - eta'd, block order, tangent at the hand-over values).
-        Writes keyframes k0..b-1; returns (block k0's new value as (pose, W),
-        its marginal covariance (11, 11), block order)."""
+        After a plain hand-over one step is the whole answer (the later data
+        move the boundary by well under a sigma); after a recovery the boundary
+        can move far, so it iterates, with a line search, until the cost stops
+        falling. Writes keyframes k0..b-1; returns (block k0's new value as
+        (pose, W), its marginal covariance (11, 11), block order)."""
         seg = self.segments[i]
         k0, b = seg["k0"], seg["b"]
         pose, W = self.pose.copy(), self.W.copy()
         pose[k0:b + 1], W[k0:b + 1] = seg["pose"], seg["W"]
         pose[b], W[b] = _block_values(seg["vals"])        # linearise the boundary where it was handed over
-        lin = linearize(self.prob, pose, W, k0, b)
-        A1, A2, rhs = _factor_arrays(self.prob, lin)
-        g = gtsam.GaussianFactorGraph()
-        unit = gtsam.noiseModel.Unit.Create(A1.shape[1])
-        for j in range(b - k0):
-            g.add(gtsam.JacobianFactor(j, A1[j], j + 1, A2[j], rhs[j], unit))
-        if k0 == 0:
-            g.add(gtsam.JacobianFactor(0, lin.A_p, lin.b_p, gtsam.noiseModel.Unit.Create(NB)))
-        else:
-            # The hand-over prior this segment started from, at its current estimate of k0.
+        ev, V = np.linalg.eigh(0.5 * (Lam_later + Lam_later.T))
+        keep = ev > 1e-9 * max(ev.max(), 1e-300)
+        A_t = np.sqrt(ev[keep])[:, None] * V[:, keep].T
+        b_t = (V[:, keep].T @ eta_later) / np.sqrt(ev[keep])
+        if k0 > 0:
             prev = self.segments[i - 1]
-            d0 = _block_local(prev["vals"], pose[k0], W[k0])
-            L = np.linalg.cholesky(np.linalg.inv(prev["cov"])).T
-            g.add(gtsam.JacobianFactor(0, L, -L @ d0, gtsam.noiseModel.Unit.Create(NB)))
-        d, V = np.linalg.eigh(0.5 * (Lam_later + Lam_later.T))
-        keep = d > 1e-9 * max(d.max(), 1e-300)
-        if keep.any():
-            A = np.sqrt(d[keep])[:, None] * V[:, keep].T
-            g.add(gtsam.JacobianFactor(b - k0, A, (V[:, keep].T @ eta_later) / np.sqrt(d[keep]),
-                                       gtsam.noiseModel.Unit.Create(int(keep.sum()))))
+            L0 = np.linalg.cholesky(np.linalg.inv(prev["cov"])).T
+
+        def build(pose, W):
+            lin = linearize(self.prob, pose, W, k0, b)
+            A1, A2, rhs = _factor_arrays(self.prob, lin)
+            g = gtsam.GaussianFactorGraph()
+            unit = gtsam.noiseModel.Unit.Create(A1.shape[1])
+            for j in range(b - k0):
+                g.add(gtsam.JacobianFactor(j, A1[j], j + 1, A2[j], rhs[j], unit))
+            cost = lin.cost
+            if k0 == 0:
+                g.add(gtsam.JacobianFactor(0, lin.A_p, lin.b_p, gtsam.noiseModel.Unit.Create(NB)))
+            else:
+                # The hand-over prior this segment started from, at its current estimate of k0.
+                r0 = L0 @ _block_local(prev["vals"], pose[k0], W[k0])
+                g.add(gtsam.JacobianFactor(0, L0, -r0, gtsam.noiseModel.Unit.Create(NB)))
+                cost += 0.5 * float(r0 @ r0)
+            if keep.any():
+                d_b = _block_local(seg["vals"], pose[b], W[b])
+                r_t = A_t @ d_b - b_t
+                g.add(gtsam.JacobianFactor(b - k0, A_t, -r_t, gtsam.noiseModel.Unit.Create(int(keep.sum()))))
+                cost += 0.5 * float(r_t @ r_t)
+            return g, cost
+
         order = gtsam.Ordering()
         for j in range(b - k0, -1, -1):       # reverse time: no fill, and k0 is eliminated last
             order.push_back(j)
+        g, cost = build(pose, W)
+        for _ in range(max_iterations):
+            bn = g.eliminateSequential(order, gtsam.EliminateQR)
+            sol = bn.optimize()
+            step = np.stack([sol.at(j) for j in range(b - k0 + 1)])
+            alpha = 1.0
+            while True:
+                p_n, W_n = pose.copy(), W.copy()
+                p_n[k0:b + 1], W_n[k0:b + 1] = retract(pose[k0:b + 1], W[k0:b + 1], alpha * step)
+                g_n, cost_n = build(p_n, W_n)
+                if cost_n <= cost or alpha < 1e-3:
+                    break
+                alpha *= 0.5
+            if cost_n > cost:
+                break
+            done = (cost - cost_n) <= 1e-9 * max(cost, 1e-300)
+            pose, W, g, cost = p_n, W_n, g_n, cost_n
+            if done or np.abs(alpha * step).max() < 1e-10:
+                break
         bn = g.eliminateSequential(order, gtsam.EliminateQR)
-        sol = bn.optimize()
-        step = np.stack([sol.at(j) for j in range(b - k0 + 1)])
-        new_pose, new_W = retract(pose[k0:b + 1], W[k0:b + 1], step)
-        self.pose[k0:b], self.W[k0:b] = new_pose[:-1], new_W[:-1]
+        self.pose[k0:b], self.W[k0:b] = pose[k0:b], W[k0:b]
         Rinv = np.linalg.inv(bn.at(bn.size() - 1).R())
-        return (new_pose[0], new_W[0]), Rinv @ Rinv.T
+        return (pose[k0].copy(), W[k0].copy()), Rinv @ Rinv.T
 
     def finish(self) -> Estimate:
         # Full back-substitution: the wildfire threshold (1e-3) would leave older
@@ -537,6 +684,44 @@ class FixedLagRunner(_Runner):
             Sig[np.ix_(S_COLS, S_COLS)] = self.smoother.marginalCovariance(S_KEY(k))
             self.Sig[k] = Sig
         self.done[k] = True
+
+    def _recovery_start(self, k: int, j: int) -> int:
+        first = int(np.argmin(self.done[:k])) if not self.done[:k].all() else k
+        return max(first, min(j, k - 1))
+
+    def recover(self, k: int, j0: int) -> None:
+        """Re-solve keyframes j0..k, the part of the window the watch looks
+        back on (as ISAM2Runner.recover), and restart the smoother at j0 with
+        its marginal there and every factor since linearised at the solution.
+        Older keyframes still in the window are harvested first."""
+        est = self.smoother.calculateEstimate()
+        for j in np.flatnonzero(~self.done[:k + 1]):
+            if j < j0:
+                self._harvest(int(j), est)
+            else:
+                self._store(int(j), est)
+        isam = self.smoother.getISAM2()
+        cov = _joint_marginal(isam, j0)
+        vals = gtsam.Values()
+        vals.insert(X_KEY(j0), est.atPose2(X_KEY(j0)))
+        vals.insert(W_KEY(j0), est.atVector(W_KEY(j0)))
+        vals.insert(S_KEY(j0), est.atVector(S_KEY(j0)))
+        p0, w0 = _block_values(vals)
+        cov_block = _to_block(cov)
+        L = np.linalg.cholesky(np.linalg.inv(cov_block)).T
+        pose, W, _ = solve_window(self.prob, self.pose, self.W, j0, k, (p0, w0, L))
+        self.pose[j0:k + 1], self.W[j0:k + 1] = pose[j0:k + 1], W[j0:k + 1]
+        graph = ISAM2Runner._information_factor(vals, np.linalg.inv(cov), np.zeros(11))
+        values = gtsam.Values()
+        for i in range(j0, k + 1):
+            values.insert(self.graph.values(i, self.pose, self.W))
+        for j in range(j0, k):
+            graph.push_back(self.graph.interval_factors(j, self.pose, self.W))
+        self.smoother = gtsam.IncrementalFixedLagSmoother(self.options.lag, _params(self.options, reuse_slots=True))
+        self._update(graph, values, range(j0, k + 1))
+        est = self.smoother.calculateEstimate()
+        for i in range(j0, k + 1):
+            self._store(i, est)
 
     def step(self, k, factors, values):
         kf = self.prob.kf

@@ -49,13 +49,14 @@ def _wheel_rates(robot: RobotConfig, meas: Measurements):
     return meas.wheel.t, v, w
 
 
-def _range_fixes(meas: Measurements, robot: RobotConfig, limit: int = 400):
-    """Multilateration fixes (t, xy, sigma) from the first ranges (Gauss-Newton)."""
+def _range_fixes(meas: Measurements, robot: RobotConfig, limit: int | None = 400):
+    """Multilateration fixes (t, xy, sigma, lever arm) of the ranging antenna
+    from the first ``limit`` ranges (all with None), by Gauss-Newton."""
     t, bxy, rr = meas.ranges
     out_t, out_p, out_s = [], [], []
     latest: dict[tuple, tuple[float, float]] = {}
     sig_r = robot.range_sigma + float(np.hypot(*robot.range_lever_arm))
-    for k in range(min(len(t), limit)):
+    for k in range(len(t) if limit is None else min(len(t), limit)):
         latest[tuple(bxy[k])] = (t[k], rr[k])
         pts = [(np.array(b), r) for b, (tb, r) in latest.items() if t[k] - tb <= _RANGE_WINDOW]
         if len(pts) < 3:
@@ -78,7 +79,7 @@ def _range_fixes(meas: Measurements, robot: RobotConfig, limit: int = 400):
         out_t.append(t[k]); out_p.append(p); out_s.append(float(np.sqrt(np.max(np.linalg.eigvalsh(cov)))))
     if not out_t:
         return None
-    return np.array(out_t), np.array(out_p), np.array(out_s), (0.0, 0.0)
+    return np.array(out_t), np.array(out_p), np.array(out_s), tuple(robot.range_lever_arm)
 
 
 def initial_state(robot: RobotConfig, meas: Measurements) -> InitialState:
@@ -160,6 +161,47 @@ def _wheel_dt(meas: Measurements) -> np.ndarray:
     return np.append(dt, np.median(dt) if dt.size else 0.0)
 
 
+def rigid_ransac(d: np.ndarray, p: np.ndarray, thr: np.ndarray, pairs: int = CONSENSUS_PAIRS):
+    """RANSAC for the 2-D rigid map p ~ R(phi) d + c between two point sets.
+
+    d, p: (M, 2) the same points in two frames; thr: (M,) inlier distance
+    [m]. Hypotheses come from pairs of points far apart (a rotation needs a
+    baseline); the best has the most inliers, then the smallest residuals.
+    Returns (phi (H,), cx (H,), cy (H,), inlier mask (H, M), index of the
+    best hypothesis). Deterministic (seeded).
+    """
+    m = len(d)
+    rng = np.random.default_rng(0)
+    sep = np.hypot(*(d[:, None, :] - d[None, :, :]).transpose(2, 0, 1))
+    i_idx, j_idx = np.nonzero(np.triu(sep >= 0.3 * sep.max(), 1))
+    if i_idx.size > pairs:
+        pick = rng.choice(i_idx.size, pairs, replace=False)
+        i_idx, j_idx = i_idx[pick], j_idx[pick]
+    dp, dd = p[j_idx] - p[i_idx], d[j_idx] - d[i_idx]
+    phi = np.arctan2(dp[:, 1], dp[:, 0]) - np.arctan2(dd[:, 1], dd[:, 0])
+    c, sn = np.cos(phi), np.sin(phi)
+    cx = p[i_idx, 0] - (c * d[i_idx, 0] - sn * d[i_idx, 1])
+    cy = p[i_idx, 1] - (sn * d[i_idx, 0] + c * d[i_idx, 1])
+    ex = p[None, :, 0] - (c[:, None] * d[None, :, 0] - sn[:, None] * d[None, :, 1]) - cx[:, None]
+    ey = p[None, :, 1] - (sn[:, None] * d[None, :, 0] + c[:, None] * d[None, :, 1]) - cy[:, None]
+    e = np.hypot(ex, ey)
+    inl = e <= thr[None, :]
+    score = inl.sum(1) - np.minimum((e / thr[None, :]) ** 2, 1.0).sum(1) / (m + 1)   # count, then closeness
+    return phi, cx, cy, inl, int(np.argmax(score))
+
+
+def rigid_fit(d: np.ndarray, p: np.ndarray, w: np.ndarray) -> tuple[float, np.ndarray]:
+    """Weighted least-squares rigid map p ~ R(phi) d + c (closed form, 2-D
+    Procrustes). w: (M,) weights. Returns (phi, c (2,))."""
+    w = w / w.sum()
+    md, mp = w @ d, w @ p
+    a, b = d - md, p - mp
+    phi = float(np.arctan2(np.sum(w * (a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0])),
+                           np.sum(w * (a[:, 0] * b[:, 0] + a[:, 1] * b[:, 1]))))
+    c, s = np.cos(phi), np.sin(phi)
+    return phi, mp - np.array([c * md[0] - s * md[1], s * md[0] + c * md[1]])
+
+
 def _antenna_path(ml, mr, dtw, track, lever, e=(0.0, 0.0, 0.0)):
     """Dead-reckoned poses (K+1, 3) from the first wheel measurement, and a
     function giving the antenna at given times, with relative scale errors
@@ -239,23 +281,7 @@ def consensus_pose(tw, ml, mr, dtw, track, ft, fp, fs, lever, scale_sigma: float
         return ConsensusFit(pose, np.diag([s_p**2, s_p**2, np.pi**2]), m, 0,
                             f"position from the median of {m} fixes; heading not observable from the first motion "
                             "(sigma = pi)")
-    rng = np.random.default_rng(0)
-    sep = np.hypot(*(W_d[:, None, :] - W_d[None, :, :]).transpose(2, 0, 1))
-    i_idx, j_idx = np.nonzero(np.triu(sep >= 0.3 * sep.max(), 1))
-    if i_idx.size > CONSENSUS_PAIRS:
-        pick = rng.choice(i_idx.size, CONSENSUS_PAIRS, replace=False)
-        i_idx, j_idx = i_idx[pick], j_idx[pick]
-    dp, dd = W_p[j_idx] - W_p[i_idx], W_d[j_idx] - W_d[i_idx]
-    phi = np.arctan2(dp[:, 1], dp[:, 0]) - np.arctan2(dd[:, 1], dd[:, 0])
-    c, sn = np.cos(phi), np.sin(phi)
-    cx = W_p[i_idx, 0] - (c * W_d[i_idx, 0] - sn * W_d[i_idx, 1])
-    cy = W_p[i_idx, 1] - (sn * W_d[i_idx, 0] + c * W_d[i_idx, 1])
-    ex = W_p[None, :, 0] - (c[:, None] * W_d[None, :, 0] - sn[:, None] * W_d[None, :, 1]) - cx[:, None]
-    ey = W_p[None, :, 1] - (sn[:, None] * W_d[None, :, 0] + c[:, None] * W_d[None, :, 1]) - cy[:, None]
-    e = np.hypot(ex, ey)
-    inl = e <= thr[None, :]
-    score = inl.sum(1) - np.minimum((e / thr[None, :]) ** 2, 1.0).sum(1) / (m + 1)   # count, then closeness
-    best = int(np.argmax(score))
+    phi, cx, cy, inl, best = rigid_ransac(W_d, W_p, thr)
     keep = inl[best]
 
     # Least squares on the inliers: (cx, cy, phi) and the scale errors
