@@ -121,6 +121,15 @@ class _Graph:
         # The numpy linearisation must not add the slip priors: built-ins carry them.
         self.lin_prob = Problem(prob.kf, prob.robot, prob.prior_mean, prob.prior_cov,
                                 np.zeros_like(prob.zero_slip), None, prob.q_slip, prob.robust, prob.robust_k)
+        # A new interval is first linearised at a prediction. A robust loss
+        # there would weigh good fixes by how far the *prediction* is off, and
+        # a prediction gone wrong would then never be corrected; so the first
+        # linearisation is Gaussian behind a gate (first_gate), and the robust
+        # loss comes in when the interval is linearised again, near its answer.
+        self.lin_first = Problem(prob.kf, prob.robot, prob.prior_mean, prob.prior_cov,
+                                 np.zeros_like(prob.zero_slip), None, prob.q_slip, None, None)
+        self.history: dict[tuple, list] = {}      # (sensor, beacon) -> recent prediction residuals
+        self.gated: dict[str, int] = {}
 
     def values(self, k: int, pose, W) -> gtsam.Values:
         v = gtsam.Values()
@@ -138,9 +147,46 @@ class _Graph:
         g.add(gtsam.LinearContainerFactor(jf, lp))
         return g
 
-    def linear_factors(self, k: int, pose, W) -> gtsam.NonlinearFactorGraph:
-        """The measurement and motion factors of interval k, linearised at (pose, W)."""
-        lin = linearize(self.lin_prob, pose, W, k, k + 1)
+    def first_gate(self, k: int, lin) -> None:
+        """Reject, in interval k's first linearisation, the fixes and ranges far
+        from the prediction *and* from what the same sensor said lately (the
+        EKF's gate, ekf.gate_reference): whitened residual and its distance
+        from the median of the last GATE_HISTORY both beyond FIRST_GATE. Zeroed
+        rows are dropped from the factor; the count is kept in self.gated."""
+        from odomgraph.estimators.ekf import GATE_HISTORY, gate_reference
+        kf, prob = self.prob.kf, self.lin_first
+        g0, g1 = np.searchsorted(kf.gps_k, [k, k + 1])
+        for i in range(g0, g1):
+            rows = 7 + 2 * prob.gps_slot[i] + np.arange(2)
+            self._gate(("gps", 0), lin, rows)
+        q0, q1 = np.searchsorted(kf.rng_k, [k, k + 1])
+        for i in range(q0, q1):
+            rows = np.array([7 + 2 * prob.g_max + prob.rng_slot[i]])
+            self._gate(("ranges", int(kf.rng_id[i])), lin, rows)
+
+    def _gate(self, key, lin, rows) -> None:
+        from odomgraph.estimators.ekf import GATE_HISTORY, gate_reference
+        u = -lin.b_u[0, rows]                          # whitened residual at the prediction
+        hist = self.history.setdefault(key, [])
+        ref = gate_reference(hist)
+        hist.append(u.copy())
+        if len(hist) > GATE_HISTORY:
+            del hist[0]
+        far = float(u @ u) > FIRST_GATE**2 * len(rows)
+        if far and (ref is None or float((u - ref) @ (u - ref)) > FIRST_GATE**2 * len(rows)):
+            lin.A_u[0, rows] = 0.0
+            lin.b_u[0, rows] = 0.0
+            self.gated[key[0]] = self.gated.get(key[0], 0) + 1
+
+    def linear_factors(self, k: int, pose, W, first: bool = False) -> gtsam.NonlinearFactorGraph:
+        """The measurement and motion factors of interval k, linearised at (pose, W):
+        with ``first``, at a prediction (Gaussian, gated: first_gate); else with
+        the robust loss."""
+        if first:
+            lin = linearize(self.lin_first, pose, W, k, k + 1)
+            self.first_gate(k, lin)
+        else:
+            lin = linearize(self.lin_prob, pose, W, k, k + 1)
         g = gtsam.NonlinearFactorGraph()
         lp = self.values(k, pose, W)
         lp.insert(X_KEY(k + 1), gtsam.Pose2(*pose[k + 1]))
@@ -157,9 +203,9 @@ class _Graph:
         g.add(gtsam.LinearContainerFactor(jf, lp))
         return g
 
-    def interval_factors(self, k: int, pose, W) -> gtsam.NonlinearFactorGraph:
+    def interval_factors(self, k: int, pose, W, first: bool = False) -> gtsam.NonlinearFactorGraph:
         """All factors of interval k: linear ones first (see linear_factors), then built-ins."""
-        g = self.linear_factors(k, pose, W)
+        g = self.linear_factors(k, pose, W, first)
         g.push_back(self.builtin_factors(k))
         return g
 
@@ -190,8 +236,8 @@ class _Runner:
             raise OdomgraphError(f"{self.method}: range biases and a robust velocity random walk are "
                                  "batch-smoother options")
         self.log, self.schedule, self.options = log, schedule, options
-        # _watch: per sensor [slow running mean, count, dof, fast running mean]
-        self._ema = {"GPS fixes": [2.0, 0, 2, 2.0], "ranges": [1.0, 0, 1, 1.0]}
+        # _watch: per sensor [slow running mean, count, dof, the last few values]
+        self._ema = {"GPS fixes": [2.0, 0, 2, []], "ranges": [1.0, 0, 1, []]}
         # causal: the online row of interval k is produced at t_{k+1} from data up to t_{k+1}
         self.prob = build_problem(log, schedule, options, causal=True)
         self.graph = _Graph(self.prob, options)
@@ -226,7 +272,7 @@ class _Runner:
         for k in range(1, n):
             t0 = time.perf_counter()
             self._new_keyframe(k)
-            factors = self.graph.interval_factors(k - 1, self.pose, self.W)
+            factors = self.graph.interval_factors(k - 1, self.pose, self.W, first=True)
             self.step(k, factors, self.graph.values(k, self.pose, self.W))
             self.update_times[k] = time.perf_counter() - t0
             if not (np.all(np.isfinite(self.pose[k])) and np.all(np.isfinite(self.W[k]))):
@@ -245,6 +291,9 @@ class _Runner:
         est.recoveries = list(self.recoveries)
         est.rejected, est.downweighted = robust_counts(self.prob, self.pose, self.W)
         est.used = measurement_counts(self.prob)
+        if self.graph.gated:
+            est.notes.append("gated at first linearisation (online): " + ", ".join(
+                f"{k} {v}" for k, v in sorted(self.graph.gated.items())))
         est.observability = self.prob.init.observability
         est.warnings = list(self.prob.init.warnings)
         return est
@@ -275,17 +324,22 @@ class _Runner:
         limit = self.options.max_mean_residual
         for name, values in checks:
             e = self._ema[name]
+            before = e[0]
             for u in values:
                 # slow: about the last 50; one gross outlier is clipped so it cannot trip it
                 e[0] = 0.98 * e[0] + 0.02 * min(u, 10.0 * limit * e[2])
-                # fast: about the last 3, clipped harder; it trips when several in a
-                # row are far off, which is when recovering early pays (a stall's onset)
-                e[3] = 0.7 * e[3] + 0.3 * min(u, 25.0 * e[2])
+                e[3].append(u)
                 e[1] += 1
+            del e[3][:-3]
             if e[1] > 100 and e[0] > limit * e[2]:
                 return f"the running mean of whitened squared {name} residuals is {e[0]:.0f} (expected about {e[2]})"
-            if e[1] > 5 and e[3] > FAST_WATCH * e[2]:
-                return (f"the last few {name} sit {np.sqrt(e[3] / e[2]):.1f} sigma from the estimate "
+            # fast: the median of the last three, so one outlier cannot trip it;
+            # against the long-run level (at most 5x its expected value), so a
+            # sensor whose sigma is set too small, and sits a few sigma off all
+            # the time, is not taken for a divergence. It catches a stall's onset.
+            fast = float(np.median(e[3]))
+            if e[1] > 5 and fast > FAST_WATCH * max(e[2], min(before, 5.0 * e[2])):
+                return (f"the last few {name} sit {np.sqrt(fast / e[2]):.1f} sigma from the estimate "
                         "(expected about 1)")
         return None
 
@@ -304,11 +358,11 @@ class _Runner:
         j0 = self._recovery_start(k, int(np.searchsorted(kf.t, t - window)))
         if j0 >= k:       # a segment just began: nothing of its own to re-solve yet
             for e in self._ema.values():
-                e[0], e[1], e[3] = float(e[2]), 0, float(e[2])
+                e[0], e[1], e[3] = float(e[2]), 0, []
             return
         self.recover(k, j0)
         for e in self._ema.values():
-            e[0], e[1], e[3] = float(e[2]), 0, float(e[2])
+            e[0], e[1], e[3] = float(e[2]), 0, []
         self._recovered_at.append(t)
         self.recoveries.append(f"t={t:.2f} s: {reason}; re-solved the {t - kf.t[j0]:.0f} s since t={kf.t[j0]:.2f} s "
                                "and carried on from there")
@@ -325,6 +379,10 @@ def _joint_marginal(isam, k: int) -> np.ndarray:
             C[off[a]:off[a + 1], off[c]:off[c + 1]] = jm.at(ka, kc)
     return 0.5 * (C + C.T)
 
+
+#: The first linearisation of a fix or range rejects it beyond this many sigma
+#: from the prediction and from the sensor's recent residuals (_Graph.first_gate).
+FIRST_GATE = 10.0
 
 #: The fast watch trips when the recent post-fit residuals average this many
 #: times their expected whitened square (about 3.9 sigma per axis).
@@ -548,15 +606,17 @@ class ISAM2Runner(_Runner):
         self._relin_next = b
         self.seg_start = b
 
-    def _smooth_segment(self, i: int, Lam_later: np.ndarray, eta_later: np.ndarray, max_iterations: int = 10):
+    def _smooth_segment(self, i: int, Lam_later: np.ndarray, eta_later: np.ndarray, max_iterations: int = 10,
+                        final: bool = False):
         """Gauss-Newton over closed segment i, from the estimate it closed with,
         given the later data's information about its last keyframe b
         (0.5 d'Lam d - eta'd, block order, tangent at the hand-over values).
         After a plain hand-over one step is the whole answer (the later data
         move the boundary by well under a sigma); after a recovery the boundary
         can move far, so it iterates, with a line search, until the cost stops
-        falling. Writes keyframes k0..b-1; returns (block k0's new value as
-        (pose, W), its marginal covariance (11, 11), block order)."""
+        falling. Writes keyframes k0..b-1 (and b with ``final``: the open
+        segment, which no later one owns); returns (block k0's new value as
+        (pose, W), its marginal covariance (11, 11), block order).""" 
         seg = self.segments[i]
         k0, b = seg["k0"], seg["b"]
         pose, W = self.pose.copy(), self.W.copy()
@@ -615,7 +675,8 @@ class ISAM2Runner(_Runner):
             if done or np.abs(alpha * step).max() < 1e-10:
                 break
         bn = g.eliminateSequential(order, gtsam.EliminateQR)
-        self.pose[k0:b], self.W[k0:b] = pose[k0:b], W[k0:b]
+        end = b + 1 if final else b      # the open segment's last keyframe has no later owner
+        self.pose[k0:end], self.W[k0:end] = pose[k0:end], W[k0:end]
         Rinv = np.linalg.inv(bn.at(bn.size() - 1).R())
         return (pose[k0].copy(), W[k0].copy()), Rinv @ Rinv.T
 
@@ -623,12 +684,22 @@ class ISAM2Runner(_Runner):
         # Full back-substitution: the wildfire threshold (1e-3) would leave older
         # keyframes with scale-factor copies that are stale by up to 1e-3.
         values = self.isam.calculateBestEstimate()
-        for k in range(self.seg_start, self.prob.kf.n):
+        n = self.prob.kf.n
+        for k in range(self.seg_start, n):
             self._store(k, values)
-        if self.segments:
-            fin_vals, cov_f = self._boundary(self.isam, self.seg_start)
-            fin = _block_values(fin_vals)
-            cov_f = _to_block(cov_f)
+        # The open segment's factors were linearised near where each keyframe
+        # first stood (a prediction, then once more 2 s later). Where the start
+        # was uncertain (heading unknown at first) that is not where the answer
+        # is: Gauss-Newton over the segment, from the ISAM2's estimate, settles
+        # it, and gives its first keyframe's marginal for the backward pass.
+        last = gtsam.Values()
+        last.insert(X_KEY(n - 1), gtsam.Pose2(*self.pose[n - 1]))
+        last.insert(W_KEY(n - 1), self.W[n - 1, W_IDX].copy())
+        last.insert(S_KEY(n - 1), self.W[n - 1, S_IDX].copy())
+        self.segments.append({"k0": self.seg_start, "b": n - 1, "vals": last, "cov": None,
+                              "pose": self.pose[self.seg_start:].copy(), "W": self.W[self.seg_start:].copy()})
+        fin, cov_f = self._smooth_segment(len(self.segments) - 1, np.zeros((NB, NB)), np.zeros(NB), final=True)
+        self.segments.pop()
         # Backward pass over the segments: the later data's information about
         # each boundary, Sigma_final^-1 - Sigma_handoff^-1 (at the handoff
         # point), is exactly what the earlier segment has not seen.

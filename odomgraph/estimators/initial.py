@@ -243,8 +243,9 @@ def consensus_pose(tw, ml, mr, dtw, track, ft, fp, fs, lever, scale_sigma: float
 
     Returns the pose at tw[0] with an honest covariance: the fit's (scale
     errors marginalised), scaled by its reduced chi-square when the fixes
-    scatter more than their sigma says, plus what dead reckoning between
-    tw[0] and the first fix can have drifted.
+    scatter more than their sigma says and by the number of fixes (the
+    estimators use them again), plus what dead reckoning between tw[0] and
+    the first fix can have drifted.
     """
     lever = np.asarray(lever, float)
     dr = _antenna_path(ml, mr, dtw, track, lever)                 # (K+1, 3), DR pose before step k
@@ -325,6 +326,10 @@ def consensus_pose(tw, ml, mr, dtw, track, ft, fp, fs, lever, scale_sigma: float
     nfix = 2 * int(keep.sum())
     chi2 = float(np.sum(r[:nfix] ** 2)) / max(1, nfix - 3)
     cov = cov6[:3, :3] * max(1.0, chi2)
+    # The estimators see these fixes again as measurements: as a prior the fit
+    # may carry about one fix's worth of them, not all (double counting made
+    # the start overconfident, and biased ranges then biased everything).
+    cov *= max(1.0, float(keep.sum()))
     # Ambiguity: a hypothesis nearly as well supported but turned well away
     # (0.3 rad, and 5 sigma) is a second mode; the heading sigma covers both.
     close = inl.sum(1) >= 0.9 * inl[best].sum()
@@ -341,7 +346,7 @@ def consensus_pose(tw, ml, mr, dtw, track, ft, fp, fs, lever, scale_sigma: float
     floor = 0.5 * float(np.median(W_s))
     cov[0, 0] += back**2 + floor**2
     cov[1, 1] += back**2 + floor**2
-    cov[2, 2] += back_th**2 + 0.01**2
+    cov[2, 2] = min(cov[2, 2] + back_th**2 + 0.01**2, np.pi**2)
     note = (f"start fitted to {int(keep.sum())} of the first {m} fixes ({W_t[-1] - W_t[0]:.1f} s, "
             f"{W_sf[-1] - W_sf[0]:.1f} m of travel)" + (f", {n_out} rejected as outliers" if n_out else ""))
     if t_first_gap > 1.0:
