@@ -346,7 +346,13 @@ def consensus_pose(tw, ml, mr, dtw, track, ft, fp, fs, lever, scale_sigma: float
     floor = 0.5 * float(np.median(W_s))
     cov[0, 0] += back**2 + floor**2
     cov[1, 1] += back**2 + floor**2
-    cov[2, 2] = min(cov[2, 2] + back_th**2 + 0.01**2, np.pi**2)
+    cov[2, 2] += back_th**2 + 0.01**2
+    if cov[2, 2] > np.pi**2:
+        # A heading sigma beyond pi says "unknown"; cap it, scaling its row and
+        # column with it so that the covariance stays positive definite.
+        f = np.pi / np.sqrt(cov[2, 2])
+        cov[2, :] *= f
+        cov[:, 2] *= f
     note = (f"start fitted to {int(keep.sum())} of the first {m} fixes ({W_t[-1] - W_t[0]:.1f} s, "
             f"{W_sf[-1] - W_sf[0]:.1f} m of travel)" + (f", {n_out} rejected as outliers" if n_out else ""))
     if t_first_gap > 1.0:
