@@ -34,6 +34,10 @@ def range_text(meta: dict) -> str:
         return "positive"
     if meta.get("ge") == 0 and not any(meta.get(k) is not None for k in ("gt", "lt", "le", "choices")):
         return "non-negative"
+    lo, hi = meta.get("ge"), meta.get("le")
+    if lo is not None and hi is not None and meta.get("gt") is None and meta.get("lt") is None:
+        sign = "positive, " if lo > 0 else ("non-negative, " if lo == 0 else "")
+        return f"{sign}between {lo:g} and {hi:g}"
     parts = []
     for key, op in (("gt", ">"), ("ge", ">="), ("lt", "<"), ("le", "<=")):
         if meta.get(key) is not None:

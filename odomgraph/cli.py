@@ -88,6 +88,7 @@ class MethodName(str, Enum):
 class RobustName(str, Enum):
     huber = "huber"
     cauchy = "cauchy"
+    none = "none"
 
 
 class ImportKind(str, Enum):
@@ -374,7 +375,8 @@ def estimate(
         help="consider: hold scale factors with zero gain, keep honest sigma (default); "
              "pseudo: the paper's literal pseudo-update (eq. 37-38).")] = HoldName.consider,
     gate: Annotated[Optional[float], typer.Option(
-        help="EKF: reject GPS/range/velocity updates whose NIS exceeds this (e.g. 16). Default: off.")] = None,
+        help="EKF: NIS above which GPS, range and velocity updates are rejected (when they also differ from "
+             "the sensor's recent ones). Default: the chi-square quantile at 1 - 1e-6 (27.6 for GPS).")] = None,
     keyframe_hz: Annotated[Optional[float], typer.Option(
         help="Smoothers: keyframe rate [Hz] (default 5; at most the encoder rate).")] = None,
     lag: Annotated[Optional[float], typer.Option(help="fixed-lag: window length [s] (default 5).")] = None,
@@ -382,13 +384,17 @@ def estimate(
         help="Smoothers: Cauchy scale [m/s] of the sparse zero-slip prior outside the calibration window "
              "(default 0.005).")] = None,
     robust: Annotated[Optional[RobustName], typer.Option(
-        help="Smoothers: robust loss for GPS fixes and ranges (real data has outliers). Default: Gaussian.")]
+        help="Smoothers: robust loss for GPS fixes and ranges (real data has outliers); default cauchy, "
+             "with graduated non-convexity in batch; none: Gaussian.")]
     = None,
     robust_k: Annotated[Optional[float], typer.Option(
-        help="Threshold of the robust loss in sigmas (default: 1.345 Huber, 2.385 Cauchy).")] = None,
+        help="Threshold of the robust loss in sigmas (default: 5 Cauchy, 1.345 Huber).")] = None,
     range_bias: Annotated[bool, typer.Option(
         "--range-bias", help="batch: also estimate a constant range bias per beacon (UWB antenna delay).")]
     = False,
+    time_offset: Annotated[bool, typer.Option(
+        "--time-offset", help="Estimate how late the GPS stamps are against the wheels, and apply it "
+                              "(without it, a clear offset is only warned about).")] = False,
 ):
     """Estimate states and odometry errors of a log; writes states.csv, trajectory.tum, summary.json
     (and online.csv, the causal estimate, for isam2).
@@ -405,7 +411,7 @@ def estimate(
         s = estimate_to_dir(log, output, Method(method.value), schedule, progress=bar, gate=gate,
                             keyframe_hz=keyframe_hz, lag=lag, slip_cauchy=slip_cauchy,
                             robust=robust.value if robust else None, robust_k=robust_k,
-                            range_bias=range_bias or None)
+                            range_bias=range_bias or None, time_offset=time_offset)
     _print_summary(s)
     typer.echo(f"wrote {output}")
 

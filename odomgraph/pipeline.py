@@ -34,16 +34,62 @@ def estimate(log: Log, method: Method = Method.ekf, schedule: Schedule = Schedul
     values mean the default. An unknown method or option is an OptionError.
     """
     method = parse_method(method)
+    time_offset = bool(options.pop("time_offset", False))
     _check_option_names(options)
     options = {k: v for k, v in options.items() if v is not None}
+    if time_offset:
+        return _with_time_offset(log, method, schedule, progress, options)
     try:
-        return _run(log, method, schedule, progress, options)
+        est = _run(log, method, schedule, progress, options)
+        # A combination the structure allows but the data barely inform (a
+        # pure rotation's common scale, say) is still pulled around by the
+        # random-walk priors: run again holding it at nominal, so that it
+        # keeps its prior value and sigma.
+        weak = {k: v for k, v in est.unobservable().items()
+                if est.observability is not None and k not in est.observability.unobservable}
+        if weak and "pin" not in options:
+            est = _run(log, method, schedule, None, {**options, "pin": tuple(weak.items())})
+        return est
     except (RuntimeError, ArithmeticError, __import__("numpy").linalg.LinAlgError) as exc:
         # GTSAM's IndeterminateSystemException and LAPACK failures: the log
         # does not constrain the problem well enough for this solver.
         from odomgraph.errors import EstimatorDivergedError
         first = next((ln.strip() for ln in str(exc).splitlines() if ln.strip()), type(exc).__name__)
         raise EstimatorDivergedError(f"{method.value}: the solver failed ({first})") from exc
+
+
+def _with_time_offset(log: Log, method: Method, schedule: Schedule, progress, options: dict) -> Estimate:
+    """``estimate`` with the GPS time offset estimated (--time-offset).
+
+    The offset is measured against the wheels (analysis.timing) with the
+    nominal parameters, the log re-stamped, the estimator run, and the offset
+    measured again with the estimated scale factors; if that moves it by more
+    than its sigma, the estimator runs once more. The result carries the
+    offset with its sigma (``Estimate.time_offsets``)."""
+    from odomgraph.analysis.timing import gps_offset
+    from odomgraph.errors import NotEnoughDataError
+    if log.gps is None:
+        raise NotEnoughDataError("--time-offset: the log has no GPS to measure a time offset of")
+    total, sigma = log.robot.gps_time_offset, None
+    scales = (1.0, 1.0, 1.0)
+    est = None
+    for _ in range(3):
+        o = gps_offset(log.with_(robot=log.robot.with_(gps_time_offset=total)), scales)
+        if o is None:
+            break
+        total, sigma = total + o.delta, o.sigma
+        if est is not None and abs(o.delta) <= o.sigma:
+            break
+        est = estimate(log.with_(robot=log.robot.with_(gps_time_offset=total)), method, schedule, progress,
+                       **options)
+        scales = tuple(float(v) for v in est.mean[-1, 8:11])
+    if est is None:
+        est = estimate(log, method, schedule, progress, **options)
+        est.warnings.append("--time-offset: too little motion to measure the GPS time offset; none applied")
+        return est
+    est.time_offsets = {"gps": {"value": float(total), "sigma": float(sigma)}}
+    est.notes.append(f"GPS time offset estimated at {total:+.3f} +- {sigma:.3f} s and applied")
+    return est
 
 
 def _run(log: Log, method: Method, schedule: Schedule, progress, options: dict) -> Estimate:
@@ -97,11 +143,15 @@ def _only(cls, options: dict) -> dict:
     return {k: v for k, v in options.items() if k in cls.__dataclass_fields__}
 
 
-def warnings_of(est: Estimate) -> list[str]:
+def warnings_of(est: Estimate, log: Log | None = None) -> list[str]:
     """Everything the user must know to trust ``est``, one line each: the
-    estimator's own warnings, then each scale combination the log does not
-    determine."""
+    estimator's own warnings, rejections and recoveries, each scale
+    combination the log does not determine, and (given the log) a GPS clock
+    that looks off against the wheels."""
     out = list(est.warnings)
+    if log is not None and log.gps is not None and not est.time_offsets:
+        from odomgraph.analysis.timing import gps_offset_warnings
+        out += gps_offset_warnings(log, est)
     for s, n in est.rejected.items():
         used = est.used.get(s)
         of = f" of {used}" if used else ""
@@ -172,7 +222,8 @@ def summary(est: Estimate, log: Log, schedule: Schedule) -> dict:
         "downweighted": est.downweighted,
         "used": est.used,
         "recoveries": est.recoveries,
-        "warnings": list(log.warnings) + warnings_of(est),
+        **({"time_offsets": est.time_offsets} if est.time_offsets else {}),
+        "warnings": list(log.warnings) + warnings_of(est, log),
         "notes": est.notes,
     }
     if est.update_times is not None and len(est.update_times) >= 10:

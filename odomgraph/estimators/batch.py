@@ -29,8 +29,9 @@ from odomgraph.errors import EstimatorDivergedError
 from odomgraph.estimators.graph import NB, Linearization, Problem, linearize, robust_counts
 from odomgraph.estimators.initial import initial_state
 from odomgraph.estimators.keyframes import build_keyframes
-from odomgraph.estimators.measurements import from_log, slip_intensity
+from odomgraph.estimators.measurements import clean, from_log, slip_intensity
 from odomgraph.estimators.observability import decondition
+from odomgraph.estimators.slipcheck import in_stretches, in_window
 from odomgraph.estimators.result import Estimate
 from odomgraph.estimators.schedule import Schedule
 from odomgraph.io.log import Log
@@ -38,7 +39,7 @@ from odomgraph.io.log import Log
 
 @dataclass(frozen=True)
 class SmootherOptions:
-    keyframe_hz: float = bounded(5.0, gt=0, le=1000)
+    keyframe_hz: float = bounded(5.0, ge=0.01, le=1000)
     """Keyframe rate [Hz] (at most the encoder rate); slip is resolved at this rate."""
     max_iterations: int = bounded(50, ge=1, integer=True)
     rel_tol: float = bounded(1e-7, gt=0, lt=1)
@@ -64,6 +65,9 @@ class SmootherOptions:
     velocity_loss: str | None = bounded(None, choices=("huber", "cauchy"), optional=True)
     """Robust loss of the velocity random walk ("huber", "cauchy"; None: Gaussian).
     For robots whose speed jumps (in-place pivots started and stopped at once)."""
+    pin: tuple[tuple[str, str], ...] = ()
+    """(scale combination, reason) pairs to hold at nominal with their prior
+    sigma, as if the log could not determine them (observability)."""
     wheel_speed_units: bool = True
     """With a calibration window, take the v and slip random walks in
     wheel-speed units (graph.linearize): no prior then pays for shrinking the
@@ -78,8 +82,8 @@ def build_problem(log: Log, schedule: Schedule, options: SmootherOptions, causal
     """The keyframe graph of a log: same initialisation and schedule as the EKF.
     ``causal``: no interval's factors read data after its end (incremental smoothers)."""
     meas = from_log(log)
-    init = initial_state(log.robot, meas)
-    kf = build_keyframes(log, init.t, options.keyframe_hz, causal)
+    init = initial_state(log.robot, meas, dict(options.pin))
+    kf = build_keyframes(clean(log)[0], init.t, options.keyframe_hz, causal)
     if kf.n < 3:
         raise EstimatorDivergedError("the log is too short for the smoother: fewer than 3 keyframes")
     # Move the initial state to the first keyframe (a fraction of an encoder period).
@@ -94,6 +98,8 @@ def build_problem(log: Log, schedule: Schedule, options: SmootherOptions, causal
         zero = np.zeros(kf.n - 1, bool)
     else:
         zero = mid < meas.t_start + schedule.calibrate_until
+        slipping, _ = in_window(init.slipping, meas.t_start, meas.t_start + schedule.calibrate_until)
+        zero &= ~in_stretches(mid, slipping)
     robust = options.slip_cauchy
     if options.range_bias and not (kf.rng_k.size and log.robot.beacons):
         from odomgraph.errors import OdomgraphError
@@ -101,7 +107,7 @@ def build_problem(log: Log, schedule: Schedule, options: SmootherOptions, causal
     loss = None if options.robust in (None, "none") else options.robust
     return Problem(kf, log.robot, mean, cov, zero, robust, slip_intensity(log.robot.process, meas), loss,
                    options.robust_k, options.range_bias_sigma if options.range_bias else None,
-                   options.velocity_loss, init=init)
+                   options.velocity_loss, init=init, spikes=dict(meas.spikes))
 
 
 def initial_guess(prob: Problem, ekf: Estimate) -> tuple[np.ndarray, np.ndarray]:
@@ -175,7 +181,7 @@ def robust_initial_guess(prob: Problem, meas) -> tuple[np.ndarray, np.ndarray]:
             travel = float(np.sum(np.abs(v[(kf.t[:-1] >= a) & (kf.t[:-1] < b)]) * GUESS_CHUNK / max(1, sel.sum())))
             thr = 3.4 * fs[sel] + 0.1 * max(travel, 1.0)
             ph, cx, cy, inl, best = rigid_ransac(d[sel], fp[sel], thr)
-            keep = inl[best]
+            keep = inl[best] if best >= 0 else np.zeros(int(sel.sum()), bool)
             if keep.sum() >= 5 and np.ptp(d[sel][keep], 0).max() > 3.0 * float(np.median(fs[sel])):
                 phi, c = rigid_fit(d[sel][keep], fp[sel][keep], 1.0 / fs[sel][keep] ** 2)
         k = (kf.t >= a) & (kf.t < b + (1e-9 if b >= edges[-1] else 0.0))
@@ -537,7 +543,9 @@ def run_batch(log: Log, schedule: Schedule = Schedule(), options: SmootherOption
         from odomgraph.errors import OdomgraphError
         from odomgraph.estimators.ekf import run_ekf
         try:
-            initial = run_ekf(log, schedule if schedule.calibrate_until is not None else Schedule(20.0))
+            from odomgraph.estimators.ekf import EKFOptions
+            initial = run_ekf(log, schedule if schedule.calibrate_until is not None else Schedule(20.0),
+                              EKFOptions(pin=options.pin))
         except (OdomgraphError, ArithmeticError, np.linalg.LinAlgError):
             initial = None
         if initial is not None and initial.recoveries:
@@ -570,15 +578,25 @@ def run_batch(log: Log, schedule: Schedule = Schedule(), options: SmootherOption
     est.calibration_cov = Sig[-1][8:11, 8:11].copy()
     est.calibration_cov_given = given
     est.observability = prob.init.observability
-    est.warnings = list(prob.init.warnings)
+    est.warnings = list(prob.init.warnings) + window_warnings(prob, schedule)
     est.notes = [f"batch: {prob.kf.n} keyframes at {options.keyframe_hz:g} Hz, {iters} Gauss-Newton iterations, "
                  f"final cost {cost:.1f}; {start}", prob.init.note]
     if not converged:
         est.warnings.append(f"batch: stopped at its iteration cap ({options.max_iterations} Gauss-Newton "
                             "iterations) before converging; the estimate may not be the optimum")
     est.rejected, est.downweighted = robust_counts(prob, pose, W)
+    est.rejected.update(prob.spikes)
     est.used = measurement_counts(prob)
     return est
+
+
+def window_warnings(prob: Problem, schedule: Schedule) -> list[str]:
+    """The warning about slip inside the calibration window (slipcheck), if any."""
+    if schedule.calibrate_until is None:
+        return []
+    t0 = float(prob.kf.t[0]) if prob.init is None else None
+    start = prob.init.t if prob.init is not None else t0
+    return in_window(prob.init.slipping, start, start + schedule.calibrate_until)[1] if prob.init else []
 
 
 def measurement_counts(prob: Problem) -> dict[str, int]:

@@ -34,6 +34,7 @@ from odomgraph.errors import EstimatorDivergedError
 from odomgraph.estimators.initial import InitialState, initial_state
 from odomgraph.estimators.measurements import Measurements, from_log, slip_intensity
 from odomgraph.estimators.observability import decondition
+from odomgraph.estimators.slipcheck import in_stretches, in_window
 from odomgraph.estimators.result import Estimate, Innovations
 from odomgraph.estimators.schedule import Hold, Schedule
 from odomgraph.io.log import Log
@@ -75,6 +76,9 @@ class EKFOptions:
     max_mean_nis: float = bounded(50.0, gt=0, infinite=True)
     """Diverged when a sensor's running mean NIS (about its last 50 updates)
     exceeds this many times its dimension: the filter no longer explains the data."""
+    pin: tuple[tuple[str, str], ...] = ()
+    """(scale combination, reason) pairs to hold at nominal with their prior
+    sigma, as if the log could not determine them (observability)."""
     slip_states: bool = True
     """False removes the slip states (they stay exactly 0 with zero variance):
     the conventional filter that believes odometry, the paper's fig. 7 baseline."""
@@ -117,6 +121,22 @@ def gate_thresholds(options: EKFOptions) -> dict[int, float | None]:
         else:                                  # chi-square with 2 dof: -2 ln(1 - p)
             out[code] = -2.0 * float(np.log1p(-options.gate_probability))
     return out
+
+
+#: Recoveries (re-acquisitions, widenings) one run may take before it gives up.
+MAX_RECOVERIES = 50
+
+
+def watch_widening(code: int, y: np.ndarray) -> tuple[slice, np.ndarray] | None:
+    """(state block, variance to add) that lets the filter follow an ungated
+    sensor whose innovations stay far beyond their noise: wheel speeds the
+    slip states cannot reach fast enough (a stall, nominal parameters far
+    off), a gyro whose bias jumped. y: the latest innovation."""
+    if code == WHEEL:
+        return _SLIP_IDX, y**2
+    if code == GYRO:
+        return slice(S.BIAS, S.BIAS + 1), y**2
+    return None
 
 
 #: Recent innovations per sensor (and beacon) the gate compares a measurement with.
@@ -199,7 +219,7 @@ class EKF:
                  init: InitialState | None = None):
         self.log, self.robot, self.schedule, self.options = log, log.robot, schedule, options
         self.meas = from_log(log)
-        self.init = init or initial_state(self.robot, self.meas)
+        self.init = init or initial_state(self.robot, self.meas, dict(options.pin))
         self.x = self.init.x.copy()
         self.P = self.init.P.copy()
         self.t = self.init.t
@@ -307,6 +327,9 @@ class EKF:
         stride = max(1, len(t_ev) // 200)
         obs = self.init.observability
         pinned = bool(obs.unobservable)
+        # The schedule's window, less where the fixes say the wheels slipped (slipcheck).
+        slipping, window_warn = in_window(self.init.slipping, m.t_start, t_switch)
+        slip_ev = in_stretches(t_ev, slipping)
         for k in range(len(t_ev)):
             t, code, i = t_ev[k], code_ev[k], row_ev[k]
             self.predict(t)
@@ -316,7 +339,7 @@ class EKF:
                 self.holding_scale = sch.hold is Hold.consider
             x = self.x
             if code == WHEEL:
-                if (switch_sigma is None and t_switch is not None) or not obs.slip_observable:
+                if (switch_sigma is None and t_switch is not None and not slip_ev[k]) or not obs.slip_observable:
                     h, H = pseudo.zero_slip(x[6], x[7])                              # eq. 35-36
                     self.update(np.zeros(2), h, H, _SLIP_IDX, self._R_slip)
                 elif switch_sigma is not None and sch.hold is Hold.pseudo:
@@ -378,9 +401,17 @@ class EKF:
             ema = nis_ema[code] = 0.98 * nis_ema[code] + 0.02 * min(nis_k, nis_clip[code])
             n_seen[code] += 1
             if n_seen[code] > 100 and ema > opt.max_mean_nis * _DOF[code]:
-                raise EstimatorDivergedError(f"EKF diverged at t={t:.3f} s: the running mean NIS of "
-                                             f"{SENSOR_NAMES[code]} is {ema:.0f} (expected {_DOF[code]}); the "
-                                             "model no longer explains the data")
+                what = (f"the running mean NIS of {SENSOR_NAMES[code]} is {ema:.0f} (expected {_DOF[code]})")
+                widen = watch_widening(code, np.atleast_1d(self.last_y))
+                if widen is None or len(recoveries) >= MAX_RECOVERIES:
+                    raise EstimatorDivergedError(f"EKF diverged at t={t:.3f} s: {what}; the model no longer "
+                                                 "explains the data")
+                # Recover instead of stopping: open up the states that explain
+                # this sensor's mismatch (a stall's slip, a bias jump) and go on.
+                blk, add = widen
+                self.P[blk, blk] += np.diag(add)
+                nis_ema[code], n_seen[code] = float(_DOF[code]), 0
+                recoveries.append(f"t={t:.2f} s: {what}; its states' covariance widened")
             n_up += 1
             if progress is not None and k % stride == 0:
                 progress(k, len(t_ev))
@@ -396,6 +427,9 @@ class EKF:
                             n_up, t_switch, switch_sigma, sch.hold, self.P[_SCALE_IDX, _SCALE_IDX].copy(),
                             self.init)
         est.recoveries = recoveries
+        est.warnings += window_warn
+        for k, v in m.spikes.items():
+            est.rejected[k] = est.rejected.get(k, 0) + v
         return est
 
 

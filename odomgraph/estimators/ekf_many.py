@@ -25,10 +25,12 @@ from odomgraph.errors import EstimatorDivergedError
 from odomgraph.estimators.ekf import (_DOF, _ENC_IDX, _GYRO_IDX, _POSE_IDX, _SCALE_IDX, _SLIP_IDX, _VEL_IDX, GATE_HISTORY,
                                       GATED,
                                       GPS, GYRO, RANGE, SENSOR_NAMES, VEL, WHEEL, EKFOptions, event_stream,
-                                      gate_thresholds, make_estimate, reacquire_widening)
+                                      MAX_RECOVERIES, gate_thresholds, make_estimate, reacquire_widening,
+                                      watch_widening)
 from odomgraph.estimators.initial import initial_state
 from odomgraph.estimators.measurements import from_log, slip_intensity
 from odomgraph.estimators.observability import decondition
+from odomgraph.estimators.slipcheck import in_stretches, in_window
 from odomgraph.estimators.result import Estimate
 from odomgraph.estimators.schedule import Hold, Schedule
 from odomgraph.io.log import Log
@@ -81,13 +83,14 @@ def run_ekf_many(logs: list[Log], schedule: Schedule = Schedule(), options: EKFO
     wall0 = time.perf_counter()
     n = len(logs)
     meas = [from_log(log) for log in logs]
-    inits = [initial_state(log.robot, m) for log, m in zip(logs, meas)]
+    inits = [initial_state(log.robot, m, dict(options.pin)) for log, m in zip(logs, meas)]
     if len({i.t for i in inits}) != 1:
         raise ValueError("run_ekf_many: the runs start at different times (give robot.toml an [initial] pose)")
     streams = [event_stream(m, inits[0].t) for m in meas]
     _check_same_timing(logs, streams)
     t_ev, code_ev, row_ev = streams[0]
     obs = inits[0].observability
+    # As ekf.EKF, with the first run's slipping stretches (the runs share their motion).
     r, m0, sch, opt = logs[0].robot, meas[0], schedule, options
 
     # Measurements stacked over runs: (N, K, ...).
@@ -118,6 +121,7 @@ def run_ekf_many(logs: list[Log], schedule: Schedule = Schedule(), options: EKFO
     track, lever_gps, lever_rng = r.track_width, r.gps_lever_arm, r.range_lever_arm
     gates = gate_thresholds(opt)
     t_switch = None if sch.calibrate_until is None else m0.t_start + sch.calibrate_until
+    slip_ev = in_stretches(t_ev, in_window(inits[0].slipping, m0.t_start, t_switch)[0])
     switch_sigma = None
     holding = False
     rows = int(np.sum(code_ev == WHEEL))
@@ -197,7 +201,7 @@ def run_ekf_many(logs: list[Log], schedule: Schedule = Schedule(), options: EKFO
                 switch_sigma = P[:, _SCALE_IDX, _SCALE_IDX].copy()
                 holding = sch.hold is Hold.consider
             if code == WHEEL:
-                if (switch_sigma is None and t_switch is not None) or not obs.slip_observable:   # as ekf.EKF
+                if (switch_sigma is None and t_switch is not None and not slip_ev[k]) or not obs.slip_observable:
                     h, H = pseudo.zero_slip(x[:, 6], x[:, 7])                        # eq. 35-36
                     update(np.zeros((n, 2)), h, H, _SLIP_IDX, R_slip)
                 elif switch_sigma is not None and sch.hold is Hold.pseudo:
@@ -265,8 +269,15 @@ def run_ekf_many(logs: list[Log], schedule: Schedule = Schedule(), options: EKFO
             seen_run[:, code] += ~rejected
             lost = (seen_run[:, code] > 100) & (nis_ema[:, code] > opt.max_mean_nis * _DOF[code])
             for j in np.nonzero(lost & ~dead)[0]:
-                kill(j, f"EKF diverged at t={t:.3f} s: the running mean NIS of {SENSOR_NAMES[code]} is "
-                        f"{nis_ema[j, code]:.0f} (expected {_DOF[code]}); the model no longer explains the data")
+                what = f"the running mean NIS of {SENSOR_NAMES[code]} is {nis_ema[j, code]:.0f} (expected {_DOF[code]})"
+                widen = watch_widening(code, np.atleast_1d(last_y[j]))
+                if widen is None or len(recoveries[j]) >= MAX_RECOVERIES:
+                    kill(j, f"EKF diverged at t={t:.3f} s: {what}; the model no longer explains the data")
+                    continue
+                blk, add = widen                                   # as EKF.run
+                P[j, blk, blk] += np.diag(add)
+                nis_ema[j, code], seen_run[j, code] = float(_DOF[code]), 0
+                recoveries[j].append(f"t={t:.2f} s: {what}; its states' covariance widened")
             if dead.any():
                 x[dead], P[dead] = frozen_x[dead], frozen_P[dead]
             if progress is not None and k % stride == 0:
@@ -288,5 +299,7 @@ def run_ekf_many(logs: list[Log], schedule: Schedule = Schedule(), options: EKFO
                             t_switch, None if switch_sigma is None else switch_sigma[j], sch.hold,
                             P[j, _SCALE_IDX, _SCALE_IDX].copy(), inits[j])
         est.recoveries = recoveries[j]
+        for key, v in meas[j].spikes.items():
+            est.rejected[key] = est.rejected.get(key, 0) + v
         out.append(est)
     return out

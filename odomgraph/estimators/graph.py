@@ -74,6 +74,8 @@ class Problem:
     the answer does not mistake good fixes for outliers) and lower it to 1."""
     init: "InitialState | None" = None
     """The initialisation the prior came from (its observability and warnings)."""
+    spikes: dict = None
+    """Single-sample spikes the log's cleaning took out, per sensor (measurements.despike)."""
 
     @property
     def wheel_speed_units(self) -> bool:

@@ -39,7 +39,7 @@ from odomgraph.checks import bounded
 from odomgraph.errors import EstimatorDivergedError
 from odomgraph.estimators.batch import (SmootherOptions, _factor_arrays, _n_measurements, build_problem,
                                         honest_blocks, keyframe_rows, marginal_blocks, measurement_counts, retract,
-                                        solve_window)
+                                        solve_window, window_warnings)
 from odomgraph.estimators.graph import NB, Problem, linearize, robust_counts
 from odomgraph.estimators.measurements import from_log
 from odomgraph.estimators.result import Estimate
@@ -290,12 +290,13 @@ class _Runner:
         est.update_times = self.update_times[1:]
         est.recoveries = list(self.recoveries)
         est.rejected, est.downweighted = robust_counts(self.prob, self.pose, self.W)
+        est.rejected.update(self.prob.spikes or {})
         est.used = measurement_counts(self.prob)
         if self.graph.gated:
             est.notes.append("gated at first linearisation (online): " + ", ".join(
                 f"{k} {v}" for k, v in sorted(self.graph.gated.items())))
         est.observability = self.prob.init.observability
-        est.warnings = list(self.prob.init.warnings)
+        est.warnings = list(self.prob.init.warnings) + window_warnings(self.prob, self.schedule)
         return est
 
 

@@ -23,6 +23,7 @@ from odomgraph import state as S
 from odomgraph.errors import NotEnoughDataError
 from odomgraph.estimators.measurements import Measurements
 from odomgraph.estimators.observability import Observability, prior_scale_cov, structure
+from odomgraph.estimators.slipcheck import slipping_stretches
 from odomgraph.io.robot import RobotConfig
 
 #: Longest multilateration window: ranges older than this are not combined [s].
@@ -41,6 +42,9 @@ class InitialState:
     note: str
     observability: Observability = field(default_factory=Observability)
     warnings: tuple[str, ...] = ()
+    slipping: tuple[tuple[float, float], ...] = ()
+    """Stretches [s] where the fixes contradict the wheels (slipcheck): no
+    schedule may take them as slip-free."""
 
 
 def _wheel_rates(robot: RobotConfig, meas: Measurements):
@@ -82,13 +86,21 @@ def _range_fixes(meas: Measurements, robot: RobotConfig, limit: int | None = 400
     return np.array(out_t), np.array(out_p), np.array(out_s), tuple(robot.range_lever_arm)
 
 
-def initial_state(robot: RobotConfig, meas: Measurements) -> InitialState:
+def initial_state(robot: RobotConfig, meas: Measurements, pin: dict[str, str] | None = None) -> InitialState:
+    """The first state and its covariance (see the module doc). ``pin``: scale
+    combinations to hold at nominal besides those the structure cannot
+    determine, with the reason (pipeline.estimate passes what a first run
+    found the data barely inform)."""
     x = S.NOMINAL.copy()
     P = np.zeros((S.N, S.N))
     pn = robot.process
     P[S.BIAS, S.BIAS] = pn.initial_bias_sigma**2
     P[S.SLIP_L, S.SLIP_L] = P[S.SLIP_R, S.SLIP_R] = pn.initial_slip_sigma**2
     obs = structure(robot, meas)
+    if pin:
+        from dataclasses import replace
+        obs = replace(obs, unobservable={**obs.unobservable, **{k: v for k, v in pin.items()
+                                                                 if k not in obs.unobservable}})
     extra = () if obs.slip_observable else (
         "slip is not observable: nothing but the wheels sees the motion (no gyro, velocity sensor or absolute "
         "fixes), so it is taken as zero throughout (plain dead reckoning)",)
@@ -108,7 +120,8 @@ def initial_state(robot: RobotConfig, meas: Measurements) -> InitialState:
         P[S.V, S.V] = (0.2 + 0.1 * abs(vw[k])) ** 2
         P[S.OMEGA, S.OMEGA] = (0.2 + 0.1 * abs(ww[k])) ** 2
         P[np.ix_(S.POSE, S.POSE)] = pose_cov
-        return InitialState(float(t0), x, P, note, obs, tuple(warnings) + extra)
+        return InitialState(float(t0), x, P, note, obs, tuple(warnings) + extra,
+                            tuple(slipping_stretches(meas, robot, float(t0), float(tw[-1]))))
 
     if robot.initial is not None:
         i = robot.initial
@@ -154,8 +167,11 @@ class ConsensusFit:
 
 
 def _wheel_dt(meas: Measurements) -> np.ndarray:
-    """(K,) length of each wheel measurement's step for dead reckoning [s]: the
-    time to the next measurement (the last one gets the median)."""
+    """(K,) length of each wheel measurement's step for dead reckoning [s]:
+    its encoder interval, each speed integrated over its own interval (see
+    measurements.dead_reckoning); for wheel speeds, the time to the next one."""
+    if meas.wheel.dt is not None:
+        return meas.wheel.dt
     t = meas.wheel.t
     dt = np.diff(t)
     return np.append(dt, np.median(dt) if dt.size else 0.0)
@@ -187,7 +203,7 @@ def rigid_ransac(d: np.ndarray, p: np.ndarray, thr: np.ndarray, pairs: int = CON
     e = np.hypot(ex, ey)
     inl = e <= thr[None, :]
     score = inl.sum(1) - np.minimum((e / thr[None, :]) ** 2, 1.0).sum(1) / (m + 1)   # count, then closeness
-    return phi, cx, cy, inl, int(np.argmax(score))
+    return phi, cx, cy, inl, int(np.argmax(score)) if score.size else -1
 
 
 def rigid_fit(d: np.ndarray, p: np.ndarray, w: np.ndarray) -> tuple[float, np.ndarray]:
@@ -249,7 +265,7 @@ def consensus_pose(tw, ml, mr, dtw, track, ft, fp, fs, lever, scale_sigma: float
     """
     lever = np.asarray(lever, float)
     dr = _antenna_path(ml, mr, dtw, track, lever)                 # (K+1, 3), DR pose before step k
-    t_dr = np.append(tw, tw[-1] + dtw[-1])
+    t_dr = np.append(tw - 0.5 * dtw, tw[-1] + 0.5 * dtw[-1])      # nodes at the interval ends
     vw, ww = 0.5 * (ml + mr), (mr - ml) / track
     travel = np.concatenate([[0.0], np.cumsum(np.abs(vw) * dtw)])
     turned = np.concatenate([[0.0], np.cumsum(np.abs(ww) * dtw)])
@@ -274,7 +290,7 @@ def consensus_pose(tw, ml, mr, dtw, track, ft, fp, fs, lever, scale_sigma: float
     back = 2.0 * scale_sigma * float(np.interp(ft[0], t_dr, travel))
     back_th = scale_sigma * float(np.interp(ft[0], t_dr, turned)) + \
         np.sqrt(2.0) * scale_sigma * float(np.interp(ft[0], t_dr, travel)) / track
-    if spread < max(3.0 * float(np.median(W_s)), 0.05) or m < 2:
+    if not spread >= max(3.0 * float(np.median(W_s)), 0.05) or m < 2:
         # The antenna hardly moved: position from the median fix, heading unknown.
         med = np.median(W_p, 0)
         s_p = float(np.hypot(np.median(W_s), np.hypot(*lever))) + back
@@ -283,6 +299,9 @@ def consensus_pose(tw, ml, mr, dtw, track, ft, fp, fs, lever, scale_sigma: float
                             f"position from the median of {m} fixes; heading not observable from the first motion "
                             "(sigma = pi)")
     phi, cx, cy, inl, best = rigid_ransac(W_d, W_p, thr)
+    if best < 0:
+        return ConsensusFit(np.array([*np.median(W_p, 0), 0.0]), np.diag([1.0, 1.0, np.pi**2]), m, 0,
+                            "position from the median of the first fixes; no pair of them fixes a heading")
     keep = inl[best]
 
     # Least squares on the inliers: (cx, cy, phi) and the scale errors

@@ -85,7 +85,8 @@ def _bin(t_kf: np.ndarray, t: np.ndarray):
     return k, inside
 
 
-def interval_means(t_kf: np.ndarray, ts: np.ndarray, z: np.ndarray, sigma, q, causal: bool = False):
+def interval_means(t_kf: np.ndarray, ts: np.ndarray, z: np.ndarray, sigma, q, causal: bool = False,
+                   max_gap: float | None = None):
     """Average over each keyframe interval of a sampled rate signal, with its 1-sigma.
 
     The signal (a gyro's yaw rate, a velocity sensor's v and omega) is
@@ -116,9 +117,17 @@ def interval_means(t_kf: np.ndarray, ts: np.ndarray, z: np.ndarray, sigma, q, ca
         sigma, q: scalar or (C,) sample 1-sigma and random-walk intensity per channel.
         causal: see above.
 
+        max_gap: the longest gap between samples [s] the interpolant may
+            bridge (None: any). A sparse sensor must not be held or
+            interpolated over long stretches as if it had been measured
+            there: an interval that would lean on a longer gap uses only the
+            samples inside it, each standing for its own instant (variance
+            sigma^2 / n plus q^2 dt / 3 for point against average), or none.
+
     Returns:
         mean: (N-1, C); sd: (N-1, C), inf where the interval has no sample
-        inside and is not between two samples; n: (N-1,) samples inside.
+        inside and is not between two samples (close enough); n: (N-1,)
+        samples inside.
     """
     t_kf = np.asarray(t_kf, float)
     ts = np.asarray(ts, float)
@@ -150,6 +159,22 @@ def interval_means(t_kf: np.ndarray, ts: np.ndarray, z: np.ndarray, sigma, q, ca
     n = np.bincount(k[inside], minlength=nint)
     between = (ja >= 0) & (jb + 1 <= last)
     sd[~((n > 0) | between)] = np.inf
+    if max_gap is not None and M > 0:
+        big = np.concatenate([[0], np.cumsum(np.diff(ts) > max_gap)])       # big gaps before sample i
+        lo, hi = np.clip(ja, 0, M - 1), np.clip(np.minimum(jb + 1, last), 0, M - 1)
+        sparse = big[hi] - big[lo] > 0
+        sparse |= (ja < 0) & (ts[0] - a > 0.5 * max_gap)                     # held before the first sample
+        tail = ts[np.clip(np.where(causal, jb, np.minimum(jb + 1, M - 1)), 0, M - 1)]
+        sparse |= (jb + 1 > last) & (b - tail > 0.5 * max_gap)               # held after the last one read
+        if sparse.any():
+            rows = np.flatnonzero(sparse)
+            dt = (b - a)[rows]
+            sums = np.stack([np.bincount(k[inside], z[inside, c], minlength=nint) for c in range(z.shape[1])], -1)
+            with np.errstate(invalid="ignore", divide="ignore"):
+                mean[rows] = sums[rows] / n[rows, None]
+                sd[rows] = np.sqrt(sigma**2 / n[rows, None] + q**2 * dt[:, None] / 3.0)
+            sd[rows[n[rows] == 0]] = np.inf
+            mean[rows[n[rows] == 0]] = 0.0
     return mean, sd, n
 
 
@@ -201,6 +226,16 @@ def _bridge_variance(ts, a, b, ja, jb, last):
     base = np.where(left_pinned, segl, 0.0)
     pin = np.where(bridge, ((u1 - base) ** 2 - (u0 - base) ** 2) ** 2 / (4 * h), 0.0)
     return np.where((j <= jb[:, None]) & (L > 0), d0 * L**2 + L**3 / 3 - pin, 0.0).sum(1)
+
+
+def _max_gap(ts: np.ndarray, t_kf: np.ndarray) -> float:
+    """The longest sample gap a rate sensor's interpolant may bridge [s]: two
+    keyframe intervals, or three of the sensor's periods up to half a second.
+    A yaw rate interpolated over longer is a guess, not a measurement (a
+    25 Hz gyro at 5 Hz keyframes bridges 0.4 s; five samples in 40 s bridge
+    nothing, each standing for its own instant)."""
+    period = float(np.median(np.diff(ts))) if len(ts) > 1 else np.inf
+    return max(min(3.0 * period, 0.5), 2.0 * float(np.median(np.diff(t_kf))))
 
 
 def build_keyframes(log: Log, t_start: float, keyframe_hz: float, causal: bool = False) -> Keyframes:
@@ -273,12 +308,13 @@ def build_keyframes(log: Log, t_start: float, keyframe_hz: float, causal: bool =
     gyro_z, gyro_sd, gyro_n = np.zeros(nint), np.full(nint, np.inf), np.zeros(nint, int)
     if log.gyro is not None and len(log.gyro.t):
         z, sd, gyro_n = interval_means(t, log.gyro.t, log.gyro.omega, r.gyro_sigma,
-                                       np.hypot(pn.yaw_accel, pn.gyro_bias), causal)
+                                       np.hypot(pn.yaw_accel, pn.gyro_bias), causal, _max_gap(log.gyro.t, t))
         gyro_z, gyro_sd = z[:, 0], sd[:, 0]
     vel_z, vel_sd, vel_n = np.zeros((nint, 2)), np.full((nint, 2), np.inf), np.zeros(nint, int)
     if log.velocity is not None and len(log.velocity.t):
         vel_z, vel_sd, vel_n = interval_means(t, log.velocity.t, np.stack([log.velocity.v, log.velocity.omega], -1),
-                                              r.velocity_sigma, (pn.accel, pn.yaw_accel), causal)
+                                              r.velocity_sigma, (pn.accel, pn.yaw_accel), causal,
+                                              _max_gap(log.velocity.t, t))
     empty2 = np.zeros((0, 2))
     gk = gs = np.zeros(0)
     gxy = gvw = empty2

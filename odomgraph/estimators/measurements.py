@@ -14,8 +14,8 @@ import numpy as np
 from factors.encoder import speed_sigma
 from odomgraph.io.log import Log
 
-#: An encoder interval longer than this many median intervals is a gap in the
-#: log; its average speed says little about any instant, so it is not used.
+#: An encoder interval longer than this many median intervals spans a dropout;
+#: its average speed says less about its midpoint, and its sigma says so.
 GAP_FACTOR = 5.0
 
 
@@ -46,9 +46,19 @@ class Measurements:
     notes: tuple[str, ...] = field(default=())
     ranges_id: np.ndarray | None = None
     """(K,) index into robot.beacons of each range."""
+    spikes: dict[str, int] = field(default_factory=dict)
+    """Single-sample spikes taken out per sensor (despike)."""
 
 
 def from_log(log: Log) -> Measurements:
+    """The log's measurements, after ``clean``."""
+    for obj, name in ((log.encoders, "encoders.csv"), (log.wheel_speeds, "wheel_speeds.csv")):
+        if obj is not None and np.any(np.diff(obj.t) <= 0):
+            from odomgraph.errors import LogFormatError
+            raise LogFormatError((log.path / name) if log.path else name,
+                                 "time does not increase (read the log with read_log, which drops rows written "
+                                 "twice)")
+    log, spikes = clean(log)
     r = log.robot
     a, b = r.encoder_sigma
     notes = []
@@ -61,10 +71,18 @@ def from_log(log: Log) -> Measurements:
         t = 0.5 * (e.t[1:] + e.t[:-1])
         gap = dt > GAP_FACTOR * np.median(dt)
         if gap.any():
+            # A dropout whose ticks arrive in the next row (the contract allows
+            # it) is still a measurement of the travel over that interval. As a
+            # speed at its midpoint it is off by how much the speed varies
+            # inside: for a random walk of intensity q the average over dt and
+            # the midpoint value differ with variance q^2 dt / 12.
+            pn = r.process
+            q2 = pn.accel**2 + (0.5 * r.track_width * pn.yaw_accel) ** 2
+            sig = np.where(gap[:, None], np.sqrt(sig**2 + q2 * dt[:, None] / 12.0), sig)
             notes.append(f"encoders: {int(gap.sum())} interval(s) longer than {GAP_FACTOR:g}x the median "
-                         f"({np.median(dt):.3g} s) skipped as gaps")
-        keep = ~gap
-        wheel = WheelMeas(t[keep], m[keep], sig[keep], dt[keep])
+                         f"({np.median(dt):.3g} s) used as average speeds with the variation inside added to "
+                         "their sigma")
+        wheel = WheelMeas(t, m, sig, dt)
     else:
         w = log.wheel_speeds
         m = np.stack([w.v_left, w.v_right], -1)
@@ -83,7 +101,19 @@ def from_log(log: Log) -> Measurements:
     if log.velocity is not None and len(log.velocity.t):
         vel = (log.velocity.t, np.stack([log.velocity.v, log.velocity.omega], -1))
     rid = None if ranges is None else np.asarray(log.ranges.beacon)
-    return Measurements(log.t_start, wheel, gyro, gps, ranges, vel, tuple(notes), rid)
+    return Measurements(log.t_start, wheel, gyro, gps, ranges, vel, tuple(notes), rid, spikes)
+
+
+def coverage(sensor, t: np.ndarray, reach: float = 0.5) -> float:
+    """Share of the times t within ``reach`` seconds of a sample of ``sensor``
+    ((t, values) or None): how much of the log a rate sensor really watches.
+    A gyro that sends five samples in 40 s exists, but pins nothing."""
+    if sensor is None or len(sensor[0]) == 0 or len(t) == 0:
+        return 0.0
+    ts = sensor[0]
+    i = np.clip(np.searchsorted(ts, t), 1, len(ts) - 1) if len(ts) > 1 else np.zeros(len(t), int)
+    near = np.minimum(np.abs(t - ts[np.maximum(i - 1, 0)]), np.abs(t - ts[i]))
+    return float(np.mean(near <= reach))
 
 
 def slip_intensity(process, meas: Measurements) -> np.ndarray:
@@ -91,9 +121,123 @@ def slip_intensity(process, meas: Measurements) -> np.ndarray:
 
     Built in common-mode c = (sL+sR)/2 and differential d = sR-sL coordinates,
     mapped by (sL, sR) = (c - d/2, c + d/2). The differential default depends
-    on the log: see ProcessNoise.slip_differential.
+    on the log: see ProcessNoise.slip_differential; a yaw-rate sensor counts
+    only where it covers at least half the log (``coverage``).
     """
     q_d = process.slip_differential
     if q_d is None:
-        q_d = 1.0 if (meas.gyro is not None or meas.velocity is not None) else 0.02
+        q_d = 1.0 if max(coverage(meas.gyro, meas.wheel.t), coverage(meas.velocity, meas.wheel.t)) >= 0.5 else 0.02
     return process.slip**2 * np.ones((2, 2)) + 0.25 * q_d**2 * np.array([[1.0, -1.0], [-1.0, 1.0]])
+
+
+#: A single sample further than this many robust sigmas (1.4826 MAD) from the
+#: median of its neighbours is a spike...
+SPIKE_MADS = 8.0
+#: ...and further than a ground robot's speed can change in that time:
+SPIKE_ACCEL = 20.0        # wheel speed [m/s^2]
+SPIKE_YAW_ACCEL = 50.0    # yaw rate [rad/s^2]
+SPIKE_FLOOR = (0.3, 0.3)  # and at least this far [m/s, rad/s]
+
+
+def _spikes(t: np.ndarray, x: np.ndarray, accel: float, floor: float, half: int = 3) -> np.ndarray:
+    """(K,) mask of single-sample spikes in a sampled signal x (K,): a Hampel
+    filter over +-half neighbours (the sample itself left out), with the
+    physical bound ``accel`` times twice the gap to its neighbours as a floor. A step (a
+    slip starting, a pivot) is not a spike: half its window agrees with it."""
+    from numpy.lib.stride_tricks import sliding_window_view
+    K = len(x)
+    if K < 2 * half + 1:
+        return np.zeros(K, bool)
+    pad = np.concatenate([np.full(half, x[0]), x, np.full(half, x[-1])])
+    win = sliding_window_view(pad, 2 * half + 1)
+    nb = np.delete(win, half, axis=1)                                  # neighbours only
+    med = np.median(nb, 1)
+    mad = 1.4826 * np.median(np.abs(nb - med[:, None]), 1)
+    # how far the signal can move between this sample and its nearest neighbours
+    gap = np.maximum(np.diff(t, prepend=t[0]), np.diff(t, append=t[-1]))
+    thr = np.maximum(np.maximum(SPIKE_MADS * mad, accel * 2.0 * gap), floor)
+    return np.abs(x - med) > thr
+
+
+def despike(log: Log) -> tuple[Log, dict[str, int]]:
+    """The log without single-sample spikes in wheel speeds and yaw rate, and
+    how many were taken out per sensor.
+
+    A 50 m/s wheel-speed spike in one encoder row (a counter glitch) would
+    otherwise be one measurement no slip or scale can explain; the estimators
+    would bend a whole calibration around it. An encoder row that spikes gets
+    the neighbours' median speed (its ticks are rewritten so that the
+    interval semantics hold); a gyro or wheel-speed sample that spikes is
+    dropped. Every estimator reads the log through this (one model, one
+    cleaning)."""
+    from dataclasses import replace
+    counts = {}
+    r = log.robot
+    if log.encoders is not None and len(log.encoders.t) > 8:
+        e = log.encoders
+        dt = np.diff(e.t)
+        t = 0.5 * (e.t[1:] + e.t[:-1])
+        out = {}
+        n = 0
+        for side, tpm in (("ticks_left", r.ticks_per_meter_left), ("ticks_right", r.ticks_per_meter_right)):
+            ticks = getattr(e, side).astype(float).copy()
+            speed = ticks[1:] / (tpm * dt)
+            bad = _spikes(t, speed, SPIKE_ACCEL, SPIKE_FLOOR[0])
+            if bad.any():
+                idx = np.flatnonzero(bad)
+                good = np.flatnonzero(~bad)
+                fill = np.interp(t[idx], t[good], speed[good]) if good.size else np.zeros(idx.size)
+                ticks[idx + 1] = np.round(fill * tpm * dt[idx])
+                n += int(bad.sum())
+            out[side] = ticks
+        if n:
+            log = log.with_(encoders=replace(e, **out))
+            counts["encoders"] = n
+    if log.wheel_speeds is not None and len(log.wheel_speeds.t) > 8:
+        w = log.wheel_speeds
+        bad = _spikes(w.t, w.v_left, SPIKE_ACCEL, SPIKE_FLOOR[0]) | _spikes(w.t, w.v_right, SPIKE_ACCEL,
+                                                                             SPIKE_FLOOR[0])
+        if bad.any():
+            log = log.with_(wheel_speeds=replace(w, t=w.t[~bad], v_left=w.v_left[~bad], v_right=w.v_right[~bad]))
+            counts["encoders"] = int(bad.sum())
+    if log.gyro is not None and len(log.gyro.t) > 8:
+        g = log.gyro
+        bad = _spikes(g.t, g.omega, SPIKE_YAW_ACCEL, SPIKE_FLOOR[1])
+        if bad.any():
+            log = log.with_(gyro=replace(g, t=g.t[~bad], omega=g.omega[~bad]))
+            counts["gyro"] = int(bad.sum())
+    return log, counts
+
+
+def clean(log: Log) -> tuple[Log, dict[str, int]]:
+    """The log as every estimator reads it: GPS stamps moved back by the
+    configured ``[gps] time_offset`` (a fix stamped t was taken at t - offset),
+    then ``despike``. Returns it with the spikes taken out per sensor."""
+    from dataclasses import replace
+    off = log.robot.gps_time_offset
+    if off and log.gps is not None:
+        log = log.with_(gps=replace(log.gps, t=log.gps.t - off))
+    return despike(log)
+
+
+def dead_reckoning(meas: Measurements, track: float, scales=(1.0, 1.0, 1.0)) -> tuple[np.ndarray, np.ndarray]:
+    """The wheels' own path from the first measurement (pose 0): times (K+1,)
+    and poses (K+1, 3), heading not wrapped, with the scale factors taken out
+    of the nominal wheel speeds (LOG_FORMAT: m = scale u).
+
+    Encoder speeds are averages over their interval: each is integrated over
+    its own interval, so the nodes sit at the interval ends (integrating from
+    the midpoints instead would lag the path by half an interval, which a
+    time-offset check then reads as a 25 ms late GPS at 20 Hz). Wheel speeds
+    already in m/s stand for their instant, each held to the next."""
+    from factors.encoder import body_velocity
+    from factors.motion import integrate
+    w = meas.wheel
+    v, om = body_velocity(w.m[:, 0], w.m[:, 1], 0.0, 0.0, *scales, track)
+    if w.dt is not None:
+        dt = w.dt
+        t = np.concatenate([[w.t[0] - 0.5 * dt[0]], w.t + 0.5 * dt])
+    else:
+        dt = np.append(np.diff(w.t), np.median(np.diff(w.t)) if len(w.t) > 1 else 0.0)
+        t = np.append(w.t, w.t[-1] + dt[-1])
+    return t, integrate(v, om, dt)

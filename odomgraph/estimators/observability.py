@@ -44,8 +44,10 @@ AFFECTS = {"scale_common": ("scale_left", "scale_right", "scale_track"),
 PIN_SIGMA = 1e-4
 #: Least turning for the track to be observable [rad].
 MIN_ROTATION = 0.5
-#: Posterior/prior sigma ratio above which a combination counts as undetermined by the data.
-WEAK_RATIO = 0.7
+#: Posterior/prior sigma ratio above which a combination counts as undetermined
+#: by the data (the data then carry under a quarter of the prior's information):
+#: it is reported unobservable, and pipeline.estimate holds it at nominal.
+WEAK_RATIO = 0.9
 
 
 @dataclass(frozen=True)
@@ -86,8 +88,18 @@ def structure(robot, meas) -> Observability:
         dt = np.zeros(len(w.t))
     v = 0.5 * (w.m[:, 0] + w.m[:, 1])
     om = (w.m[:, 1] - w.m[:, 0]) / robot.track_width
-    travel = float(np.sum(np.abs(v) * dt))
-    rotation = float(np.sum(np.abs(om) * dt))
+    # Distances from the net motion of each second, not from |speed|: tick
+    # noise of a robot standing still would otherwise add up to metres.
+    b = np.floor((w.t - w.t[0]) / 1.0).astype(int) if len(w.t) else np.zeros(0, int)
+    net = lambda x: np.bincount(b, x * dt) if len(b) else np.zeros(1)
+    # A turn in place with wheels a few percent apart shows a forward creep
+    # that is no translation: only what exceeds that (at twice the prior
+    # sigma) counts.
+    half_diff = 0.5 * (w.m[:, 1] - w.m[:, 0])
+    travel = float(np.sum(np.maximum(np.abs(net(v)) - 2.0 * robot.process.initial_scale_sigma
+                                     * np.abs(net(half_diff)), 0.0)))
+    rotation = float(np.sum(np.abs(net(om))))
+    wheel_travel = float(np.sum(0.5 * (np.abs(net(w.m[:, 0])) + np.abs(net(w.m[:, 1])))))   # a pivot turns them
     n_gps, n_rng = _count(meas.gps), _count(meas.ranges)
     sig_abs = np.inf
     if n_gps >= 3:
@@ -105,8 +117,8 @@ def structure(robot, meas) -> Observability:
                                    f"({sig_abs:.2g} m) to fix the wheel scale")
         else:
             out["scale_common"] = "no absolute position or speed reference (GPS, ranges or a velocity sensor)"
-    if travel < 0.1:
-        out["scale_ratio"] = f"the wheels report {travel:.2g} m of travel: nothing to compare the wheels on"
+    if wheel_travel < 0.1:
+        out["scale_ratio"] = f"the wheels report {wheel_travel:.2g} m of travel: nothing to compare them on"
     elif not yaw_ref:
         out["scale_ratio"] = "no yaw-rate or heading reference (gyro, velocity sensor or absolute fixes)"
     if not yaw_ref:

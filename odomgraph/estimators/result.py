@@ -54,6 +54,8 @@ class Estimate:
     used: dict[str, int] = field(default_factory=dict)
     """Measurements offered to the estimator, per sensor."""
     recoveries: list[str] = field(default_factory=list)
+    time_offsets: dict[str, dict[str, float]] = field(default_factory=dict)
+    """Sensor time offsets estimated and applied, {"gps": {"value", "sigma"}} [s]."""
     """Each time the estimator caught itself diverging and recovered, with when and how."""
     warnings: list[str] = field(default_factory=list)
     """One line each: what the user must know to trust the result (unobservable

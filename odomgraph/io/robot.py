@@ -46,16 +46,16 @@ class ProcessNoise:
     covariance singular); only ``scale`` may be 0.
     """
 
-    accel: float = bounded(0.2, gt=0)
+    accel: float = bounded(0.2, ge=1e-9, le=1e3)
     """Forward acceleration noise driving v [m/s^2 /sqrt(Hz), i.e. (m/s)/sqrt(s)]."""
-    yaw_accel: float = bounded(0.3, gt=0)
+    yaw_accel: float = bounded(0.3, ge=1e-9, le=1e3)
     """Angular acceleration noise driving omega [(rad/s)/sqrt(s)]."""
-    slip: float = bounded(0.05, gt=0)
+    slip: float = bounded(0.05, ge=1e-9, le=1e3)
     """Common-mode slip random walk, of (slip_left + slip_right)/2 [(m/s)/sqrt(s)].
 
     Common-mode slip trades off against v and is seen only through absolute
     sensors, so a large intensity only adds noise."""
-    slip_differential: float | None = bounded(None, gt=0, optional=True)
+    slip_differential: float | None = bounded(None, ge=1e-9, le=1e3, optional=True)
     """Differential slip random walk, of slip_right - slip_left [(m/s)/sqrt(s)].
 
     None picks by the log: 1.0 when it has a yaw-rate sensor (gyro or velocity
@@ -63,19 +63,19 @@ class ProcessNoise:
     can follow a wheel that starts spinning within a few updates; 0.02 when it
     has none, because then a differential slip looks exactly like a turn and a
     large intensity lets the filter trade heading for slip."""
-    gyro_bias: float = bounded(1e-3, gt=0)
+    gyro_bias: float = bounded(1e-3, ge=1e-9, le=1e3)
     """Gyro bias random walk [(rad/s)/sqrt(s)]."""
-    scale: float = bounded(0.0, ge=0)
+    scale: float = bounded(0.0, ge=0, le=1.0)
     """Scale-factor random walk [1/sqrt(s)]; 0: constants, as in the paper."""
-    initial_scale_sigma: float = bounded(0.05, gt=0)
+    initial_scale_sigma: float = bounded(0.05, ge=1e-6, le=1.0)
     """Prior 1-sigma of each scale factor about 1 [-]."""
-    initial_slip_sigma: float = bounded(0.1, gt=0)
+    initial_slip_sigma: float = bounded(0.1, ge=1e-6, le=100.0)
     """Prior 1-sigma of each slip [m/s]."""
-    initial_bias_sigma: float = bounded(0.05, gt=0)
+    initial_bias_sigma: float = bounded(0.05, ge=1e-6, le=100.0)
     """Prior 1-sigma of the gyro bias [rad/s]."""
-    pseudo_slip_sigma: float = bounded(1e-3, gt=0)
+    pseudo_slip_sigma: float = bounded(1e-3, ge=1e-6, le=1.0)
     """1-sigma of the zero-slip pseudo-measurement (paper eq. 35-36) [m/s]."""
-    pseudo_scale_sigma: float = bounded(1e-4, gt=0)
+    pseudo_scale_sigma: float = bounded(1e-4, ge=1e-6, le=1.0)
     """1-sigma of the hold-scale pseudo-measurement (paper eq. 37-38) [-]."""
 
     def __post_init__(self):
@@ -97,6 +97,9 @@ class RobotConfig:
     """Per-axis GPS 1-sigma [m] where gps.csv has no sigma column (paper eq. 39)."""
     gps_origin: tuple[float, float] | None = None
     """(lat, lon) [deg] of the local east/north origin; None: the first fix."""
+    gps_time_offset: float = 0.0
+    """How late the GPS stamps are [s]: a fix stamped t was taken at t - offset
+    (receiver latency; ``estimate --time-offset`` measures it)."""
     gyro_sigma: float = 0.01
     """Gyro 1-sigma [rad/s] (paper eq. 40)."""
     range_sigma: float = 0.05
@@ -135,27 +138,35 @@ class RobotConfig:
 
 
 # ----------------------------------------------------------------- reading
-def _number(gt=None, ge=None, required=False):
-    return {"kind": "number", "range": {"gt": gt, "ge": ge}, "required": required}
+def _number(gt=None, ge=None, le=None, required=False):
+    return {"kind": "number", "range": {"gt": gt, "ge": ge, "le": le}, "required": required}
 
 
-def _vector(n, gt=None, ge=None):
-    return {"kind": "vector", "n": n, "range": {"gt": gt, "ge": ge}}
+def _vector(n, gt=None, ge=None, le=None):
+    return {"kind": "vector", "n": n, "range": {"gt": gt, "ge": ge, "le": le}}
+
+
+#: A sensor sigma below this [m, rad, m/s] is not a noise level but a typo (its
+#: square underflows the filter's arithmetic); above SIGMA_MAX it is no sensor.
+SIGMA_MIN, SIGMA_MAX = 1e-6, 1e6
 
 
 #: robot.toml, table by table: every key a reader accepts and its range.
 #: ``[calibration]`` is the record ``calibrate`` writes; readers ignore it.
 SCHEMA: dict[str, dict | None] = {
-    "wheels": {"ticks_per_meter_left": _number(gt=0, required=True),
-               "ticks_per_meter_right": _number(gt=0, required=True),
-               "track_width": _number(gt=0, required=True)},
-    "encoders": {"sigma": _vector(2, ge=0)},
-    "gps": {"lever_arm": _vector(2), "sigma": _number(gt=0), "origin": _vector((2, 3))},
-    "gyro": {"sigma": _number(gt=0)},
-    "range": {"sigma": _number(gt=0), "lever_arm": _vector(2), "beacons": {"kind": "beacons"}},
-    "velocity": {"sigma": _vector(2, gt=0)},
-    "initial": {"x": _number(required=True), "y": _number(required=True), "theta": _number(required=True),
-                "sigma": _vector(3, gt=0)},
+    "wheels": {"ticks_per_meter_left": _number(ge=1e-3, le=1e9, required=True),
+               "ticks_per_meter_right": _number(ge=1e-3, le=1e9, required=True),
+               "track_width": _number(ge=1e-3, le=100.0, required=True)},
+    "encoders": {"sigma": _vector(2, ge=0, le=SIGMA_MAX)},
+    "gps": {"lever_arm": _vector(2, ge=-100.0, le=100.0), "sigma": _number(ge=SIGMA_MIN, le=SIGMA_MAX),
+            "origin": _vector((2, 3)), "time_offset": _number(ge=-10.0, le=10.0)},
+    "gyro": {"sigma": _number(ge=SIGMA_MIN, le=SIGMA_MAX)},
+    "range": {"sigma": _number(ge=SIGMA_MIN, le=SIGMA_MAX), "lever_arm": _vector(2, ge=-100.0, le=100.0),
+              "beacons": {"kind": "beacons"}},
+    "velocity": {"sigma": _vector(2, ge=SIGMA_MIN, le=SIGMA_MAX)},
+    "initial": {"x": _number(ge=-1e8, le=1e8, required=True), "y": _number(ge=-1e8, le=1e8, required=True),
+                "theta": _number(ge=-100.0, le=100.0, required=True),
+                "sigma": _vector(3, ge=SIGMA_MIN, le=SIGMA_MAX)},
     "process": {name: {"kind": "number", "range": meta, "required": False}
                 for name, meta in field_ranges(ProcessNoise).items()},
     "calibration": None,
@@ -290,8 +301,9 @@ def load_robot(path: Path | str) -> RobotConfig:
     process = ProcessNoise(**{k: r.get("process", k, default=getattr(pdef, k)) for k in pdef.__dataclass_fields__})
     origin = r.get("gps", "origin")
     enc = r.get("encoders", "sigma", default=(0.005, 0.01))
-    if enc[0] <= 0:
-        r.fail("encoders", "sigma", f"needs a positive constant part a (sigma = a + b|v|), got {list(enc)}")
+    if enc[0] < SIGMA_MIN:
+        r.fail("encoders", "sigma", f"needs a positive constant part a (sigma = a + b|v|, a >= {SIGMA_MIN:g}), "
+                                    f"got {list(enc)}")
     return RobotConfig(
         ticks_per_meter_left=r.get("wheels", "ticks_per_meter_left"),
         ticks_per_meter_right=r.get("wheels", "ticks_per_meter_right"),
@@ -300,6 +312,7 @@ def load_robot(path: Path | str) -> RobotConfig:
         gps_lever_arm=r.get("gps", "lever_arm", default=(0.0, 0.0)),
         gps_sigma=r.get("gps", "sigma", default=0.05),
         gps_origin=origin[:2] if origin else None,
+        gps_time_offset=r.get("gps", "time_offset", default=0.0),
         gyro_sigma=r.get("gyro", "sigma", default=0.01),
         range_sigma=r.get("range", "sigma", default=0.05),
         range_lever_arm=r.get("range", "lever_arm", default=(0.0, 0.0)),
@@ -348,7 +361,8 @@ def robot_toml(cfg: RobotConfig, extra: dict[str, dict] | None = None) -> str:
                    "track_width": cfg.track_width},
         "encoders": {"sigma": cfg.encoder_sigma},
         "gps": {"lever_arm": cfg.gps_lever_arm, "sigma": cfg.gps_sigma,
-                **({"origin": cfg.gps_origin} if cfg.gps_origin else {})},
+                **({"origin": cfg.gps_origin} if cfg.gps_origin else {}),
+                **({"time_offset": cfg.gps_time_offset} if cfg.gps_time_offset else {})},
         "gyro": {"sigma": cfg.gyro_sigma},
         "range": {"sigma": cfg.range_sigma, "lever_arm": cfg.range_lever_arm,
                   **({"beacons": [{"id": b.id, "x": b.x, "y": b.y} for b in cfg.beacons]} if cfg.beacons else {})},
