@@ -89,7 +89,7 @@ def score(est, log, clean_rms: float | None, case: Case) -> dict:
     from odomgraph.analysis.metrics import truth_errors
     from odomgraph.pipeline import status_of
     err = truth_errors(est, log)
-    t0 = log.t_start
+    t0 = 0.0                       # fault times are on the scenario's clock
     out = {
         "finished": True,
         "nan": bool(not (np.isfinite(est.mean).all() and np.isfinite(est.sigma).all())),

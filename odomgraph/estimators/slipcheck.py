@@ -49,18 +49,16 @@ def slipping_stretches(meas, robot, t0: float, t1: float) -> list[tuple[float, f
         return np.stack([np.interp(t, t_dr, dr[:, 0]) + np.cos(th) * lever[0] - np.sin(th) * lever[1],
                          np.interp(t, t_dr, dr[:, 1]) + np.sin(th) * lever[0] + np.cos(th) * lever[1]], -1)
 
-    # Fixes averaged over +-SMOOTH (their noise shrinks with the count), then
-    # pairs about STEP apart, and the same span on the wheels.
-    lo = np.searchsorted(ft, ft - SMOOTH)
-    hi = np.searchsorted(ft, ft + SMOOTH, side="right")
-    cum = np.concatenate([np.zeros((1, 2)), np.cumsum(fp, 0)])
-    cnt = (hi - lo).astype(float)
-    fm = (cum[hi] - cum[lo]) / cnt[:, None]
-    fm_t = np.interp(np.arange(len(ft)), np.arange(len(ft)), ft)     # the stamps, as the centres
-    a_dr = antenna(fm_t)
-    cum_a = np.concatenate([np.zeros((1, 2)), np.cumsum(a_dr, 0)])
-    am = (cum_a[hi] - cum_a[lo]) / cnt[:, None]                       # the wheels, averaged the same way
-    sm = fs / np.sqrt(cnt)
+    # Fixes smoothed by the median of about 2 SMOOTH seconds of them (their
+    # noise shrinks, and an outlier among them does not count), then pairs
+    # about STEP apart, and the same span on the wheels.
+    from numpy.lib.stride_tricks import sliding_window_view
+    rate = (len(ft) - 1) / max(ft[-1] - ft[0], 1e-9)
+    h = max(1, int(round(SMOOTH * rate)))
+    pad = lambda x: np.concatenate([np.repeat(x[:1], h, 0), x, np.repeat(x[-1:], h, 0)])
+    fm = np.median(sliding_window_view(pad(fp), 2 * h + 1, axis=0), -1)
+    am = np.median(sliding_window_view(pad(antenna(ft)), 2 * h + 1, axis=0), -1)
+    sm = 1.2533 * fs / np.sqrt(2 * h + 1)            # the median's sigma
     j = np.searchsorted(ft, ft + STEP)
     ok = j < len(ft)
     i, j = np.flatnonzero(ok), j[ok]

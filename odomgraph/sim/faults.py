@@ -41,7 +41,8 @@ class Stall:
 
 @dataclass(frozen=True)
 class Faults:
-    """What to inject (all off by default). Times are seconds from the log start."""
+    """What to inject (all off by default). Times are seconds on the scenario's
+    clock (the simulated log starts at 0), as slip events and stalls are."""
     outlier_rate: float = 0.0
     """Fraction of GPS fixes and ranges replaced by outliers."""
     outlier_size: float = 5.0
@@ -108,7 +109,7 @@ class Faults:
     def apply_to_log(self, log: Log, seed: int = 0) -> Log:
         """The log with the file faults (truth unchanged)."""
         rng = np.random.default_rng([seed, 0xFA17])
-        t0 = log.t_start
+        t0 = 0.0                   # the scenario's clock, as for stalls and slip events
         changes = {}
         for name in ("encoders", "wheel_speeds", "gps", "gyro", "ranges", "velocity"):
             obj = getattr(log, name)
