@@ -534,6 +534,9 @@ def calibrate(
     tune: Annotated[bool, typer.Option(
         "--tune/--no-tune", help="Choose the velocity process noise by predicting held-out fixes "
                                  "(default on; it is written to the [process] table).")] = True,
+    force: Annotated[bool, typer.Option(
+        "--force", help="Write even when the checks fail (a mounting mistake, or parameters that predict "
+                        "held-out data worse than nominal).")] = False,
 ):
     """Estimate corrected ticks per metre and track width from a calibration log and write them
     (with their 1-sigma) as a robot.toml. Run it once after changing tyres."""
@@ -542,12 +545,19 @@ def calibrate(
     schedule = _parse_schedule(calibrate_until, HoldName.consider)
     log = read_log(log_dir)
     with _Progress(f"calibrate ({method.value})") as bar:
-        new, rep = calibrate_to_file(log, output, schedule, Method(method.value), progress=bar, tune=tune)
+        new, rep = calibrate_to_file(log, output, schedule, Method(method.value), progress=bar, tune=tune,
+                                     force=force)
     r = log.robot
-    for key, old in (("ticks_per_meter_left", r.ticks_per_meter_left),
-                     ("ticks_per_meter_right", r.ticks_per_meter_right), ("track_width", r.track_width)):
+    unobs = rep["unobservable"]
+    for key, old, names in (("ticks_per_meter_left", r.ticks_per_meter_left, ("scale_left", "scale_common")),
+                            ("ticks_per_meter_right", r.ticks_per_meter_right, ("scale_right", "scale_common")),
+                            ("track_width", r.track_width, ("scale_track",))):
         v = rep[key]
-        typer.echo(f"{key:<22} {old:.6g} -> {v['value']:.6g} ± {v['sigma']:.2g}")
+        held = [n for n in names if n in unobs]
+        tail = f"  ({held[0]} not determined: kept at nominal)" if held else ""
+        typer.echo(f"{key:<22} {old:.6g} -> {v['value']:.6g} ± {v['sigma']:.2g}{tail}")
+    if rep["held_out"]:
+        typer.echo(rep["held_out"]["text"])
     pn = rep["process_noise"]
     if pn["held_out_rms_m"]:
         cv = ", ".join(f"x{r['factor']:g}: {100 * r['rms_m']:.2f} cm" for r in pn["held_out_rms_m"])
@@ -556,6 +566,10 @@ def calibrate(
     a, b = rep["dead_reckoning_nominal"], rep["dead_reckoning_calibrated"]
     typer.echo(f"dead reckoning on this log (vs {rep['reference']}): RMS {a['rms_m']:.3f} -> {b['rms_m']:.3f} m, "
                f"final {a['final_m']:.3f} -> {b['final_m']:.3f} m")
+    for w in rep["warnings"]:
+        typer.echo(f"odomgraph: warning: {' '.join(str(w).split())}", err=True)
+    for w in rep["problems"]:
+        typer.echo(f"odomgraph: warning: written with --force despite: {' '.join(str(w).split())}", err=True)
     typer.echo(f"wrote {output}")
 
 
@@ -563,8 +577,8 @@ def calibrate(
 @_user_errors
 def import_(
     kind: Annotated[ImportKind, typer.Argument(help="optiodom: an OptiOdom run CSV; librsf: a libRSF *_Input.txt.")],
-    source: Annotated[Path, typer.Argument(help="The file to import.")],
-    output: Annotated[Path, typer.Option("--output", "-o", help="Log directory to write.")],
+    source: Annotated[Path, typer.Argument(help="The file to import (rosbag: a .bag, or a ROS 2 bag directory).")],
+    output: Annotated[Optional[Path], typer.Option("--output", "-o", help="Log directory to write.")] = None,
     metadata: Annotated[Optional[Path], typer.Option(
         help="optiodom: the session's *_metadata.csv (default: the one beside SOURCE).")] = None,
     fixes_hz: Annotated[float, typer.Option(
@@ -572,21 +586,50 @@ def import_(
     fix_sigma: Annotated[float, typer.Option(help="optiodom: 1-sigma of those fixes [m].")] = 0.01,
     ground_truth: Annotated[Optional[Path], typer.Option(
         help="librsf: the ground-truth file (default: *_GT.txt beside SOURCE).")] = None,
-    wheel_topic: Annotated[str, typer.Option(help="rosbag: sensor_msgs/JointState topic.")] = "/joint_states",
-    left_joint: Annotated[str, typer.Option(help="rosbag: left wheel joint name.")] = "left_wheel_joint",
-    right_joint: Annotated[str, typer.Option(help="rosbag: right wheel joint name.")] = "right_wheel_joint",
-    wheel_radius: Annotated[Optional[float], typer.Option(help="rosbag: nominal wheel radius [m].")] = None,
+    list_topics: Annotated[bool, typer.Option(
+        "--list", help="rosbag: list every topic (type, count, rate), the ones the import would pick, and the "
+                       "/tf_static frames; write nothing.")] = False,
+    wheel_topic: Annotated[Optional[str], typer.Option(
+        help="rosbag: the wheels: sensor_msgs/JointState, or nav_msgs/Odometry or geometry_msgs/TwistStamped "
+             "(their twist is split into wheel speeds through --track-width, which assumes the odometry came "
+             "from the wheels alone). Default: the one such topic.")] = None,
+    left_joint: Annotated[Optional[str], typer.Option(
+        help="rosbag: left wheel joint name (default: the joint named left ... wheel).")] = None,
+    right_joint: Annotated[Optional[str], typer.Option(
+        help="rosbag: right wheel joint name (default: the joint named right ... wheel).")] = None,
+    wheel_radius: Annotated[Optional[float], typer.Option(
+        help="rosbag: nominal wheel radius [m] (JointState wheels only).")] = None,
     track_width: Annotated[Optional[float], typer.Option(help="rosbag: nominal track width [m].")] = None,
-    gps_topic: Annotated[Optional[str], typer.Option(help="rosbag: sensor_msgs/NavSatFix topic.")] = None,
-    imu_topic: Annotated[Optional[str], typer.Option(help="rosbag: sensor_msgs/Imu topic (gyro z).")] = None,
-    gps_lever_arm: Annotated[str, typer.Option(
-        help="rosbag: GPS antenna 'x,y' in the robot frame [m] (ROS keeps it in TF, not in NavSatFix).")]
-    = "0,0",
+    gps_topic: Annotated[Optional[str], typer.Option(
+        help="rosbag: sensor_msgs/NavSatFix topic (default: the one there is; '' for none).")] = None,
+    imu_topic: Annotated[Optional[str], typer.Option(
+        help="rosbag: sensor_msgs/Imu topic (default: the one there is; '' for none).")] = None,
+    imu_axis: Annotated[str, typer.Option(
+        help="rosbag: the IMU axis that measures yaw: auto (the signed axis that follows the wheels' turn "
+             "rate), x, y, z, -x, -y or -z.")] = "auto",
+    gps_lever_arm: Annotated[Optional[str], typer.Option(
+        help="rosbag: GPS antenna 'x,y' in the robot frame [m] (default: from /tf_static, else 0,0).")] = None,
 ):
     """Convert another dataset's files into a log directory (LOG_FORMAT.md)."""
     from odomgraph.errors import OdomgraphError
     from odomgraph.io.log import write_log
     from odomgraph.io.outdir import check_output
+    if list_topics:
+        if kind is not ImportKind.rosbag:
+            raise OdomgraphError("--list is for import rosbag")
+        from odomgraph.io.importers.rosbag import list_topics as topics_of
+        topics, frames = topics_of(source)
+        w = max([len(t.topic) for t in topics] + [5])
+        typer.echo(f"{'topic':<{w}}  {'type':<34} {'count':>7} {'rate':>9}  picked as")
+        for t in topics:
+            typer.echo(f"{t.topic:<{w}}  {t.msgtype:<34} {t.count:>7} {t.rate_hz:>6.1f} Hz  {t.role or ''}")
+        for f in frames:
+            typer.echo(f"tf_static: {f}")
+        if not frames:
+            typer.echo("tf_static: none")
+        return
+    if output is None:
+        raise OdomgraphError("import needs --output/-o, the log directory to write")
     inputs = (source, metadata, ground_truth)
     check_output(output, inputs)
     if kind is ImportKind.optiodom:
@@ -594,15 +637,17 @@ def import_(
         log = import_optiodom(source, metadata, fixes_hz, fix_sigma)
     elif kind is ImportKind.rosbag:
         from odomgraph.io.importers.rosbag import import_rosbag
-        if wheel_radius is None or track_width is None:
-            raise OdomgraphError("import rosbag needs --wheel-radius and --track-width (the nominal robot)")
-        try:
-            lever = tuple(float(v) for v in gps_lever_arm.split(","))
-            assert len(lever) == 2
-        except (ValueError, AssertionError):
-            raise OdomgraphError(f"--gps-lever-arm: expected 'x,y' in metres, got {gps_lever_arm!r}") from None
+        if track_width is None:
+            raise OdomgraphError("import rosbag needs --track-width (the nominal robot) [m]")
+        lever = None
+        if gps_lever_arm is not None:
+            try:
+                lever = tuple(float(v) for v in gps_lever_arm.split(","))
+                assert len(lever) == 2
+            except (ValueError, AssertionError):
+                raise OdomgraphError(f"--gps-lever-arm: expected 'x,y' in metres, got {gps_lever_arm!r}") from None
         log = import_rosbag(source, wheel_topic, left_joint, right_joint, wheel_radius, track_width,
-                            gps_topic, imu_topic, gps_lever_arm=lever)
+                            gps_topic, imu_topic, gps_lever_arm=lever, imu_axis=imu_axis)
     else:
         from odomgraph.io.importers.librsf import import_librsf
         log = import_librsf(source, ground_truth)
@@ -615,6 +660,8 @@ def import_(
                                      f"{exc.problem}") from None
     write_log(log, output, inputs)
     typer.echo(f"wrote {output} ({'; '.join(log.notes)})")
+    for w in log.warnings:
+        typer.echo(f"odomgraph: warning: {' '.join(str(w).split())}", err=True)
 
 
 def main() -> None:

@@ -32,3 +32,7 @@ class OptionError(OdomgraphError):
 
 class NotEnoughDataError(OdomgraphError):
     """The log is valid, but too short or too sparse for what was asked."""
+
+
+class CalibrationRejectedError(OdomgraphError):
+    """``calibrate`` found a problem with its own result and wrote nothing."""

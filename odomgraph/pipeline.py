@@ -8,7 +8,10 @@ from __future__ import annotations
 from enum import Enum
 from pathlib import Path
 
+import numpy as np
+
 from odomgraph.analysis.metrics import nis_summary, truth_errors
+from odomgraph.errors import CalibrationRejectedError, OdomgraphError
 from odomgraph.estimators.result import Estimate
 from odomgraph.estimators.schedule import Schedule
 from odomgraph.io.log import Log
@@ -35,10 +38,87 @@ def estimate(log: Log, method: Method = Method.ekf, schedule: Schedule = Schedul
     """
     method = parse_method(method)
     time_offset = bool(options.pop("time_offset", False))
+    fit_noise = bool(options.pop("fit_noise", True))
     _check_option_names(options)
     options = {k: v for k, v in options.items() if v is not None}
     if time_offset:
-        return _with_time_offset(log, method, schedule, progress, options)
+        return _with_time_offset(log, method, schedule, progress, {**options, "fit_noise": fit_noise})
+    from odomgraph.analysis.mounting import mounting_warnings
+    from odomgraph.errors import EstimatorDivergedError
+    try:
+        est = _estimate_once(log, method, schedule, progress, options)
+        _check_physical(est)
+        if fit_noise:
+            est = _with_noise_scales(est, log, method, schedule, options)
+        _check_physical(est)
+    except EstimatorDivergedError as exc:
+        # A mounting mistake is the likeliest cause, and the data can name it.
+        found = mounting_warnings(log)
+        if found:
+            raise EstimatorDivergedError(f"{exc}; the log shows why: {'; '.join(found)}") from exc
+        raise
+    est, log = _with_prior_checked(est, log, method, schedule, options)
+    est.warnings += mounting_warnings(log) + _window_warnings(est, log, schedule)
+    return est
+
+
+#: A calibration window with fewer absolute measurements than this calibrates nothing.
+MIN_WINDOW_FIXES = 5
+
+
+def _window_warnings(est: Estimate, log: Log, schedule: Schedule) -> list[str]:
+    """A calibration window that is empty or too short to calibrate in (the
+    scale factors then stay at their prior, which is not an estimate)."""
+    c = schedule.calibrate_until
+    if not c:
+        return []
+    t_end = log.t_start + c
+    if est.t[0] >= t_end:
+        return [f"the calibration window (until t={t_end:.1f} s) ended before the estimator started at "
+                f"t={est.t[0]:.1f} s: nothing was calibrated in it; lengthen --calibrate-until"]
+    n = sum(int(np.sum((s.t >= est.t[0]) & (s.t < t_end))) for s in (log.gps, log.ranges, log.velocity)
+            if s is not None)
+    if n < MIN_WINDOW_FIXES:
+        return [f"the calibration window (t={est.t[0]:.1f}-{t_end:.1f} s) holds only {n} absolute measurements: "
+                "too few to calibrate the scale factors in it; lengthen --calibrate-until"]
+    return []
+
+
+#: A scale factor this many prior sigmas from 1 says the prior is wrong.
+PRIOR_CONFLICT = 4.0
+
+
+def _check_physical(est: Estimate) -> None:
+    """EstimatorDivergedError when a final scale factor is not physical (as
+    the EKF's own check, EKFOptions.max_scale_error): a smoother can settle
+    on a track scale below zero (a gyro upside down) and call it converged."""
+    from odomgraph.errors import EstimatorDivergedError
+    k = est.mean[-1, 8:11]
+    if k.min() < 0.05 or k.max() > 6.0:
+        raise EstimatorDivergedError(f"{est.method}: the scale factors came out {np.round(k, 3).tolist()}, which is "
+                                     "not physical (outside 0.05 to 6)")
+
+
+def _with_prior_checked(est: Estimate, log: Log, method: Method, schedule: Schedule, options: dict):
+    """(estimate, log), with a warning when a scale factor lands far outside
+    its prior: the nominal parameters are badly off (the libRSF cut's wheels
+    read twice their speed against a 5 % prior), and everything that rests on
+    the prior (the slip/scale split, the sigmas) deserves suspicion. Running
+    again with a wide prior was tried: on that cut it let the scale factors
+    run to 10-28, a 30 s range-only log cannot pin them."""
+    pn = log.robot.process
+    k = est.mean[-1, 8:11]
+    off = float(np.max(np.abs(k - 1.0)))
+    if off > PRIOR_CONFLICT * pn.initial_scale_sigma:
+        est.warnings.append(f"the scale factors came out up to {off:.0%} from nominal ({np.round(k, 3).tolist()}), "
+                            f"far outside their prior (sigma {pn.initial_scale_sigma:g}): the nominal parameters are "
+                            "badly off, and the result leans on a prior that is wrong; run calibrate on a log with "
+                            "good fixes, or widen [process] initial_scale_sigma")
+    return est, log
+
+
+def _estimate_once(log: Log, method: Method, schedule: Schedule, progress, options: dict) -> Estimate:
+    """One estimate, run again holding what the data barely inform (see estimate)."""
     try:
         est = _run(log, method, schedule, progress, options)
         # A combination the structure allows but the data barely inform (a
@@ -56,6 +136,30 @@ def estimate(log: Log, method: Method = Method.ekf, schedule: Schedule = Schedul
         from odomgraph.errors import EstimatorDivergedError
         first = next((ln.strip() for ln in str(exc).splitlines() if ln.strip()), type(exc).__name__)
         raise EstimatorDivergedError(f"{method.value}: the solver failed ({first})") from exc
+
+
+def _with_noise_scales(est: Estimate, log: Log, method: Method, schedule: Schedule, options: dict) -> Estimate:
+    """Widen GPS and range sigmas that the data say are too small, and run
+    again (at most twice): every sigma of the estimate inherits them
+    (analysis.noise). The scales found and applied go into the result."""
+    from odomgraph.analysis.noise import WIDEN_ABOVE, noise_scales, widened
+    applied: dict[str, float] = {}
+    cur = log
+    measured = noise_scales(est, cur)
+    for _ in range(2):
+        act = {k: v for k, v in noise_scales(est, cur).items() if v > WIDEN_ABOVE}
+        if not act:
+            break
+        for k, v in act.items():
+            applied[k] = applied.get(k, 1.0) * v
+        cur = widened(cur, act)
+        est = _estimate_once(cur, method, schedule, None, options)
+    est.noise_scales = {k: {"measured": v, "applied": applied.get(k, 1.0)} for k, v in measured.items()}
+    for k, f in applied.items():
+        conf = log.robot.gps_sigma if k == "gps" else log.robot.range_sigma
+        est.warnings.append(f"{k}: the data scatter {f:.2g}x more than robot.toml's sigma ({conf:.3g} m) says: it "
+                            f"was widened to {conf * f:.3g} m for this run (calibrate writes it back)")
+    return est
 
 
 def _with_time_offset(log: Log, method: Method, schedule: Schedule, progress, options: dict) -> Estimate:
@@ -223,6 +327,7 @@ def summary(est: Estimate, log: Log, schedule: Schedule) -> dict:
         "used": est.used,
         "recoveries": est.recoveries,
         **({"time_offsets": est.time_offsets} if est.time_offsets else {}),
+        "noise_scales": est.noise_scales,
         "warnings": list(log.warnings) + warnings_of(est, log),
         "notes": est.notes,
     }
@@ -374,7 +479,67 @@ def calibrate(log: Log, schedule: Schedule = Schedule(calibrate_until=None), met
         e = np.hypot(p[:, 0] - rx, p[:, 1] - ry)
         report[f"dead_reckoning_{name}"] = {"rms_m": float(np.sqrt(np.mean(e**2))), "final_m": float(e[-1])}
     report["reference"] = "truth" if log.truth is not None else "smoothed estimate"
+    report.update(_calibration_checks(log, est, k, sk, method, schedule, options))
+    new = _with_fitted_noise(new, est, report["warnings"])
+    report["noise_scales"] = est.noise_scales
     return new, report
+
+
+#: A calibrated scale factor this far from 1 is flagged as implausible.
+IMPLAUSIBLE = 0.10
+
+
+def _calibration_checks(log: Log, est: Estimate, k, sk, method: Method, schedule: Schedule, options: dict) -> dict:
+    """What ``calibrate`` must know before it writes: {"warnings": [...],
+    "unobservable": {name: reason}, "held_out": {...} or None,
+    "problems": [...]} (a non-empty "problems" means: do not write).
+
+    The parameters are fitted again on the first part of the log and scored
+    on the rest against the nominal ones (analysis.holdout). A fit that
+    agrees with nominal within 2 sigma passes without a contest (the scores
+    then differ by noise only)."""
+    from odomgraph.analysis.holdout import held_out, split_time
+    from odomgraph.analysis.mounting import mounting_warnings
+    warnings = warnings_of(est, log)
+    problems = [w for w in mounting_warnings(log)]
+    unobs = est.unobservable()
+    for name, v, s in zip(("scale_left", "scale_right", "scale_track"), k, sk):
+        if abs(v - 1.0) > IMPLAUSIBLE and est.calibration[name].get("observable", True):
+            warnings.append(f"{name} came out {v - 1.0:+.1%} from nominal ({v:.4f} +- {s:.2g}): implausible for "
+                            "a tyre or track change; check the nominal ticks per metre and track width")
+    ho, ho_text = None, None
+    t_split = split_time(log)
+    if t_split is None:
+        warnings.append("no held-out check: the log has too few fixes and no gyro to test the calibration on")
+    else:
+        try:
+            train = estimate(log.truncated(t_split), method, schedule, None, **options)
+            k_tr = [float(v) for v in train.mean[-1, 8:11]]
+            s_tr = np.sqrt(np.maximum(np.diag(train.scale_cov()), 0.0))
+            ho = held_out(log, (1.0, 1.0, 1.0), k_tr, t_split)
+        except OdomgraphError as exc:
+            problems.append(f"the fit on the first part of the log (to t={t_split:.0f} s) failed: {exc}")
+        if ho is None and not problems:
+            warnings.append(f"no held-out check: too little data after t={t_split:.0f} s to score the calibration")
+        elif ho is not None:
+            ho_text = ho.text()
+            agrees = bool(np.all(np.abs(np.asarray(k_tr) - 1.0) <= 2.0 * np.maximum(s_tr, 1e-9)))
+            if not (ho.passed or agrees):
+                problems.append(f"the calibration predicts held-out data worse than the nominal parameters: {ho_text}")
+    held = None if ho is None else {
+        "kind": ho.kind, "t0": ho.t0, "t1": ho.t1, "n": ho.n, "unit": ho.unit,
+        "nominal": ho.nominal, "calibrated": ho.calibrated, "passed": ho.passed, "text": ho_text}
+    return {"warnings": warnings, "unobservable": unobs, "held_out": held, "problems": problems}
+
+
+def _with_fitted_noise(robot, est: Estimate, warnings: list):
+    """The robot with each GPS/range sigma widened by the scale the data asked
+    for (pipeline._with_noise_scales): calibrate writes it back."""
+    for sensor, field_name in (("gps", "gps_sigma"), ("ranges", "range_sigma")):
+        f = est.noise_scales.get(sensor, {}).get("applied", 1.0)
+        if f > 1.0:
+            robot = robot.with_(**{field_name: getattr(robot, field_name) * f})
+    return robot
 
 
 def _is_calibration_file(path: Path) -> bool:
@@ -389,24 +554,33 @@ def _is_calibration_file(path: Path) -> bool:
 
 
 def calibrate_to_file(log: Log, out: Path, schedule: Schedule = Schedule(calibrate_until=None),
-                      method: Method = Method.batch, progress=None, tune: bool = True, **options):
+                      method: Method = Method.batch, progress=None, tune: bool = True, force: bool = False,
+                      **options):
     """``calibrate`` and write the calibrated robot.toml to ``out`` (atomically).
 
     The output is checked before the work starts: it must not lie inside the
     log (``-o LOG/robot.toml`` would overwrite the input), and an existing
-    file is replaced only if an earlier calibration wrote it. Returns
-    (RobotConfig, report) as ``calibrate``."""
+    file is replaced only if an earlier calibration wrote it. Nothing is
+    written when the checks find a problem (a mounting mistake, a calibration
+    that predicts held-out data worse than nominal) unless ``force``: a
+    CalibrationRejectedError says why. Returns (RobotConfig, report) as
+    ``calibrate``."""
     from odomgraph.io.outdir import atomic_output_file, check_output
     from odomgraph.io.robot import robot_toml
     inputs = (log.path,) if log.path else ()
     check_output(out, inputs, directory=False)
     new, rep = calibrate(log, schedule, method, progress, tune, **options)
+    if rep["problems"] and not force:
+        raise CalibrationRejectedError(f"{out} not written: {'; '.join(rep['problems'])} (--force writes it anyway)")
     extra = {"calibration": {
         "written_by": "odomgraph calibrate",
         "from_log": str(log.path) if log.path else "", "method": rep["method"],
         "ticks_per_meter_left_sigma": rep["ticks_per_meter_left"]["sigma"],
         "ticks_per_meter_right_sigma": rep["ticks_per_meter_right"]["sigma"],
-        "track_width_sigma": rep["track_width"]["sigma"]}}
+        "track_width_sigma": rep["track_width"]["sigma"],
+        "unobservable": ", ".join(rep["unobservable"]) or "none",
+        "held_out": rep["held_out"]["text"] if rep["held_out"] else "not checked",
+        "forced": bool(rep["problems"])}}
     with atomic_output_file(out, inputs, is_ours=_is_calibration_file) as tmp:
         tmp.write_text(robot_toml(new, extra), encoding="utf-8")
     return new, rep

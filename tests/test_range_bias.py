@@ -66,10 +66,12 @@ def test_marginals_with_the_bias_variable_equal_the_dense_inverse():
 def test_librsf_range_bias_improves_the_smoother():
     """Real UWB ranges read long (the ground truth's mean residuals are +0.09 to
     +0.16 m): the bias states come out positive and of that size, and the
-    error does not grow (measured 0.26 against 0.29 m without them)."""
+    error does not grow (measured 0.262 against 0.283 m without them). The
+    range sigma is held as configured (fit_noise=False) so that only the bias
+    states differ between the two runs."""
     log = import_librsf(RSF)
-    plain = truth_errors(estimate(log, Method.batch, Schedule(0.0)), log).rms_position_m
-    est = estimate(log, Method.batch, Schedule(0.0), range_bias=True)
+    plain = truth_errors(estimate(log, Method.batch, Schedule(0.0), fit_noise=False), log).rms_position_m
+    est = estimate(log, Method.batch, Schedule(0.0), range_bias=True, fit_noise=False)
     err = truth_errors(est, log).rms_position_m
     assert err < 0.3 and err < plain + 0.01, (err, plain)
     vals = [v["value"] for v in est.range_bias.values()]

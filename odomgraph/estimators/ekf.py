@@ -71,8 +71,11 @@ class EKFOptions:
     lock the filter out: the covariance that sensor sees is widened by the
     rejected innovations, so that the next measurement can pull the state
     back (a recovery, counted and reported)."""
-    max_scale_error: float = bounded(0.5, gt=0, infinite=True)
-    """|scale - 1| beyond which the filter is declared diverged."""
+    max_scale_error: float = bounded(5.0, gt=0, infinite=True)
+    """|scale - 1| beyond which the filter is declared diverged (a scale factor
+    must also stay above 0.05). Real nominal parameters can be off by 2x (the
+    libRSF cut), so only the non-physical is divergence; far outside the
+    prior is a warning (pipeline)."""
     max_mean_nis: float = bounded(50.0, gt=0, infinite=True)
     """Diverged when a sensor's running mean NIS (about its last 50 updates)
     exceeds this many times its dimension: the filter no longer explains the data."""
@@ -291,10 +294,10 @@ class EKF:
         d = np.diagonal(P)
         if not (np.isfinite(x).all() and np.isfinite(d).all()) or (d < -1e-12).any():
             raise EstimatorDivergedError(f"EKF diverged at t={self.t:.3f} s: non-finite state or covariance")
-        if np.abs(x[S.SCALE] - 1.0).max() > self.options.max_scale_error:
+        if np.abs(x[S.SCALE] - 1.0).max() > self.options.max_scale_error or x[S.SCALE].min() < 0.05:
             raise EstimatorDivergedError(
-                f"EKF diverged at t={self.t:.3f} s: scale factors {np.round(x[S.SCALE], 3).tolist()} are "
-                f"more than {self.options.max_scale_error:.0%} from 1")
+                f"EKF diverged at t={self.t:.3f} s: scale factors {np.round(x[S.SCALE], 3).tolist()} are not "
+                f"physical (outside 0.05 to {1 + self.options.max_scale_error:g})")
 
     # ---------------------------------------------------------------- run
     def run(self, progress=None) -> Estimate:

@@ -215,12 +215,12 @@ def run_ekf_many(logs: list[Log], schedule: Schedule = Schedule(), options: EKFO
                 nis = update(wheel_m[:, i], h, H, _ENC_IDX, Rw)
                 d = np.diagonal(P, 0, 1, 2)
                 bad = ~(np.isfinite(x).all(1) & np.isfinite(d).all(1)) | (d < -1e-12).any(1)
-                far = np.abs(x[:, S.SCALE] - 1.0).max(1) > opt.max_scale_error
+                far = (np.abs(x[:, S.SCALE] - 1.0).max(1) > opt.max_scale_error) | (x[:, S.SCALE].min(1) < 0.05)
                 for j in np.nonzero((bad | far) & ~dead)[0]:
                     kill(j, f"EKF diverged at t={t:.3f} s: " + (
                         "non-finite state or covariance" if bad[j] else
-                        f"scale factors {np.round(x[j, S.SCALE], 3).tolist()} are more than "
-                        f"{opt.max_scale_error:.0%} from 1"))
+                        f"scale factors {np.round(x[j, S.SCALE], 3).tolist()} are not physical (outside 0.05 to "
+                        f"{1 + opt.max_scale_error:g})"))
                 out_t[row] = t
                 out_x[row] = x
                 Pr = P if not obs.unobservable else decondition(P, obs, S.SCALE, obs.prior_sigma)  # as ekf.EKF

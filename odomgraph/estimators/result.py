@@ -54,9 +54,12 @@ class Estimate:
     used: dict[str, int] = field(default_factory=dict)
     """Measurements offered to the estimator, per sensor."""
     recoveries: list[str] = field(default_factory=list)
+    """Each time the estimator caught itself diverging and recovered, with when and how."""
     time_offsets: dict[str, dict[str, float]] = field(default_factory=dict)
     """Sensor time offsets estimated and applied, {"gps": {"value", "sigma"}} [s]."""
-    """Each time the estimator caught itself diverging and recovered, with when and how."""
+    noise_scales: dict[str, dict[str, float]] = field(default_factory=dict)
+    """Per sensor, the factor by which the data scatter beyond robot.toml's
+    sigma ("measured") and the factor the sigma was widened by ("applied")."""
     warnings: list[str] = field(default_factory=list)
     """One line each: what the user must know to trust the result (unobservable
     parameters, rejected measurements, a hit iteration cap, ...)."""

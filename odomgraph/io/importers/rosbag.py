@@ -1,18 +1,33 @@
-"""ROS 1 / ROS 2 bags, read with the ``rosbags`` package (no ROS install needed).
+"""ROS 1 / ROS 2 bags (.bag, a rosbag2 directory, sqlite3 or mcap), read with
+the ``rosbags`` package (no ROS install needed).
 
-Topics are chosen by the caller:
+Topics are picked by their type when the choice is unambiguous, or given:
 
-* wheels: ``sensor_msgs/JointState``; positions [rad] are differenced and
-  converted with the wheel radius (speeds stamped at the interval midpoint),
-  or velocities [rad/s] are used directly when there are no positions;
+* wheels, one of
+  - ``sensor_msgs/JointState``: positions [rad] are differenced and converted
+    with the wheel radius (speeds stamped at the interval midpoint), or
+    velocities [rad/s] are used when there are no positions. The two wheel
+    joints are found by name when exactly two joints look like wheels;
+  - ``nav_msgs/Odometry`` or ``geometry_msgs/TwistStamped``: the body twist
+    (v, omega) becomes per-wheel surface speeds through the nominal track,
+    v -/+ omega b/2. This assumes the odometry came from the wheels alone
+    (diff_drive_controller's does; robot_localization's filtered output does
+    not, and is never picked by itself);
 * GPS: ``sensor_msgs/NavSatFix`` -> lat/lon projected to a local east/north
-  frame at the first fix (fixes with status < 0, i.e. no fix, are dropped);
-* gyro: ``sensor_msgs/Imu`` angular_velocity.z.
+  frame at the first fix; fixes with status < 0 (no fix) are dropped and
+  counted; the position covariance, when given, becomes each fix's sigma;
+* gyro: ``sensor_msgs/Imu`` angular_velocity on the axis that measures yaw.
+  A mounted IMU often reports yaw on another axis (issue 13: a robot's y
+  axis correlated 0.86 with its odometry's yaw rate against 0.01 for z), so
+  by default the axis and sign that follow the wheels' turn rate are taken,
+  with a warning when that is not +z.
 
-Times are the messages' header stamps, the clock the sensors share.
+Times are the messages' header stamps, the clock the sensors share; bags on
+a real clock start near 1.7e9 s, where float64 keeps 0.2 us.
 """
 from __future__ import annotations
 
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -21,6 +36,37 @@ from odomgraph.errors import LogFormatError
 from odomgraph.io.geodesy import latlon_to_local
 from odomgraph.io.log import Gps, Gyro, Log, WheelSpeeds
 from odomgraph.io.robot import RobotConfig
+
+WHEEL_TYPES = {"sensor_msgs/msg/JointState": "joints", "nav_msgs/msg/Odometry": "odometry",
+               "geometry_msgs/msg/TwistStamped": "twist"}
+IMU_TYPE, GPS_TYPE, TF_TYPE = "sensor_msgs/msg/Imu", "sensor_msgs/msg/NavSatFix", "tf2_msgs/msg/TFMessage"
+#: Topic names that are never picked as wheels by themselves: fused, not wheel, odometry.
+NOT_WHEELS = ("filtered", "ekf", "fused", "global", "gps", "visual", "vo", "slam")
+AXES = ("x", "y", "z")
+#: The wheels must turn this much (std of yaw rate [rad/s]) for the IMU axis to be chosen from the data.
+MIN_TURN = 0.05
+
+
+@dataclass(frozen=True)
+class Topic:
+    """One topic of a bag, as ``--list`` shows it."""
+    topic: str
+    msgtype: str
+    count: int
+    rate_hz: float
+    role: str | None
+    """"wheels", "imu" or "gps" when the importer would pick it, else None."""
+
+
+def _reader(bag: Path):
+    try:
+        from rosbags.highlevel import AnyReader
+        from rosbags.typesys import Stores, get_typestore
+    except ImportError:
+        raise LogFormatError(bag, "reading bags needs the 'rosbags' package: pip install 'odomgraph[rosbag]'") from None
+    if not bag.exists():
+        raise LogFormatError(bag, "bag does not exist")
+    return AnyReader([bag], default_typestore=get_typestore(Stores.ROS2_HUMBLE))
 
 
 def _stamp(msg) -> float:
@@ -34,88 +80,260 @@ def _increasing(t: np.ndarray, *cols):
     return (t[keep], *(c[order][keep] for c in cols))
 
 
-def import_rosbag(bag: Path | str, wheel_topic: str, left_joint: str, right_joint: str, wheel_radius: float,
-                  track_width: float, gps_topic: str | None = None, imu_topic: str | None = None,
-                  gyro_sigma: float = 0.01, encoder_sigma=(0.005, 0.01),
-                  gps_lever_arm=(0.0, 0.0)) -> Log:
-    """Import wheel joints (and optionally GPS and gyro) from a bag; see the module doc.
+def _candidates(conns) -> dict[str, list]:
+    """{role: [connection, ...]} of the topics each role could take."""
+    out = {"wheels": [], "imu": [], "gps": []}
+    for c in conns:
+        if c.msgtype in WHEEL_TYPES:
+            out["wheels"].append(c)
+        elif c.msgtype == IMU_TYPE:
+            out["imu"].append(c)
+        elif c.msgtype == GPS_TYPE:
+            out["gps"].append(c)
+    return out
 
-    The antenna's lever arm (robot frame [m]) is not in NavSatFix (ROS keeps it
-    in TF), so it is given here; a wrong one makes the estimators report
-    divergence on the GPS."""
-    try:
-        from rosbags.highlevel import AnyReader
-        from rosbags.typesys import Stores, get_typestore
-    except ImportError:
-        raise LogFormatError(bag, "reading bags needs the 'rosbags' package: pip install 'odomgraph[rosbag]'") from None
+
+def _pick(cands: dict[str, list]) -> dict[str, str | None]:
+    """{role: topic or None}: the one candidate of each role, or None when
+    there is none or the choice is ambiguous. Wheel odometry is preferred to
+    topics whose names say they are fused, and JointState to odometry."""
+    picks = {}
+    for role, cs in cands.items():
+        cs = list(cs)
+        if role == "wheels":
+            cs = [c for c in cs if not any(w in c.topic.lower() for w in NOT_WHEELS)]
+            joints = [c for c in cs if WHEEL_TYPES[c.msgtype] == "joints"]
+            cs = joints if len(joints) == 1 else cs
+        topics = sorted({c.topic for c in cs})
+        picks[role] = topics[0] if len(topics) == 1 else None
+    return picks
+
+
+def list_topics(bag: Path | str) -> tuple[list[Topic], list[str]]:
+    """(every topic with its type, count, rate and the role it would be picked
+    for; the static transforms found, one "parent -> child (x, y, z)" line each)."""
     bag = Path(bag)
-    if not bag.exists():
-        raise LogFormatError(bag, "bag does not exist")
-    if wheel_radius <= 0 or track_width <= 0:
-        raise LogFormatError(bag, "--wheel-radius and --track-width must be positive")
-    wanted = {t for t in (wheel_topic, gps_topic, imu_topic) if t}
-    joints, fixes, rates = [], [], []
     try:
-        with AnyReader([bag], default_typestore=get_typestore(Stores.ROS2_HUMBLE)) as reader:
-            present = {c.topic for c in reader.connections}
-            missing = wanted - present
-            if missing:
-                raise LogFormatError(bag, f"topic(s) {sorted(missing)} not in the bag (it has {sorted(present)})")
-            conns = [c for c in reader.connections if c.topic in wanted]
-            for conn, _t, raw in reader.messages(connections=conns):
-                msg = reader.deserialize(raw, conn.msgtype)
-                if conn.topic == wheel_topic:
-                    names = list(msg.name)
-                    if left_joint not in names or right_joint not in names:
-                        raise LogFormatError(bag, f"{wheel_topic}: joints {left_joint!r}/{right_joint!r} not in "
-                                                  f"{names}")
-                    il, ir = names.index(left_joint), names.index(right_joint)
-                    pos = np.asarray(msg.position, float)
-                    vel = np.asarray(msg.velocity, float)
-                    joints.append((_stamp(msg), *(pos[[il, ir]] if pos.size else (np.nan, np.nan)),
-                                   *(vel[[il, ir]] if vel.size else (np.nan, np.nan))))
-                elif conn.topic == gps_topic:
-                    if msg.status.status >= 0:
-                        cov = np.asarray(msg.position_covariance, float)
-                        sig = float(np.sqrt(0.5 * (cov[0] + cov[4]))) if msg.position_covariance_type > 0 else np.nan
-                        fixes.append((_stamp(msg), msg.latitude, msg.longitude, sig))
-                else:
-                    rates.append((_stamp(msg), msg.angular_velocity.z))
+        with _reader(bag) as reader:
+            conns = list(reader.connections)
+            picks = _pick(_candidates(conns))
+            span = max(reader.duration * 1e-9, 1e-9)
+            by_topic: dict[str, list] = {}
+            for c in conns:
+                by_topic.setdefault(c.topic, []).append(c)
+            topics = []
+            for name, cs in sorted(by_topic.items()):
+                n = sum(c.msgcount for c in cs)
+                role = next((r for r, t in picks.items() if t == name), None)
+                topics.append(Topic(name, cs[0].msgtype, n, n / span, role))
+            frames = _static_frames(reader, conns)
     except LogFormatError:
         raise
     except Exception as exc:  # rosbags raises its own types for unreadable bags
         raise LogFormatError(bag, f"cannot read the bag: {exc}") from None
-    if len(joints) < 2:
-        raise LogFormatError(bag, f"{wheel_topic}: fewer than two JointState messages")
-    j = np.array(joints)
-    t, pl, pr, vl, vr = _increasing(j[:, 0], j[:, 1], j[:, 2], j[:, 3], j[:, 4])
-    if np.all(np.isfinite(pl)) and np.all(np.isfinite(pr)):
-        dt = np.diff(t)
-        ws = WheelSpeeds(0.5 * (t[1:] + t[:-1]), np.diff(pl) * wheel_radius / dt, np.diff(pr) * wheel_radius / dt)
-    elif np.all(np.isfinite(vl)) and np.all(np.isfinite(vr)):
-        ws = WheelSpeeds(t, vl * wheel_radius, vr * wheel_radius)
-    else:
-        raise LogFormatError(bag, f"{wheel_topic}: JointState has neither positions nor velocities for the wheels")
-    gps = None
-    origin = None
-    gps_sigma = 0.05
+    return topics, [f"{p} -> {c} ({x:+.3f}, {y:+.3f}, {z:+.3f}) m" for (p, c), (x, y, z) in sorted(frames.items())]
+
+
+def _static_frames(reader, conns) -> dict[tuple[str, str], tuple[float, float, float]]:
+    """{(parent, child): translation [m]} from /tf_static."""
+    out = {}
+    tf = [c for c in conns if c.msgtype == TF_TYPE and c.topic == "/tf_static"]
+    if not tf:   # messages(connections=[]) would read every message
+        return out
+    for conn, _t, raw in reader.messages(connections=tf):
+        for tr in reader.deserialize(raw, conn.msgtype).transforms:
+            v = tr.transform.translation
+            out[(tr.header.frame_id.lstrip("/"), tr.child_frame_id.lstrip("/"))] = (v.x, v.y, v.z)
+    return out
+
+
+def _wheel_joints(bag: Path, topic: str, names: list[str], left: str | None, right: str | None) -> tuple[str, str]:
+    """The two wheel joints: the given ones, or the two names that look like wheels (left/right in them)."""
+    if left and right:
+        if left not in names or right not in names:
+            raise LogFormatError(bag, f"{topic}: joints {left!r}/{right!r} not in {names} "
+                                      "(--left-joint/--right-joint)")
+        return left, right
+    wheels = [n for n in names if "wheel" in n.lower()] or names
+    ls = [n for n in wheels if "left" in n.lower()]
+    rs = [n for n in wheels if "right" in n.lower()]
+    if len(ls) == 1 and len(rs) == 1:
+        return left or ls[0], right or rs[0]
+    raise LogFormatError(bag, f"{topic}: cannot tell which joints are the left and right wheels among {names}; "
+                              "give --left-joint and --right-joint")
+
+
+def import_rosbag(bag: Path | str, wheel_topic: str | None = None, left_joint: str | None = None,
+                  right_joint: str | None = None, wheel_radius: float | None = None, track_width: float | None = None,
+                  gps_topic: str | None = None, imu_topic: str | None = None, gyro_sigma: float = 0.01,
+                  encoder_sigma=(0.005, 0.01), gps_lever_arm=None, imu_axis: str = "auto") -> Log:
+    """Import wheels (and GPS and gyro when the bag has them) from a bag; see the module doc.
+
+    Topics left None are picked by type when unambiguous ("" turns a sensor
+    off). ``wheel_radius`` [m] is needed for JointState wheels only;
+    ``track_width`` [m] always. ``gps_lever_arm`` (robot frame [m]) is not in
+    NavSatFix: by default it is taken from /tf_static (base_link to the fix's
+    frame) when there, else (0, 0) with a note. ``imu_axis``: "auto", or one
+    of x, y, z, -x, -y, -z."""
+    bag = Path(bag)
+    if track_width is None or track_width <= 0:
+        raise LogFormatError(bag, "import rosbag needs a positive --track-width (the nominal robot) [m]")
+    if imu_axis not in ("auto", *AXES, *(f"-{a}" for a in AXES)):
+        raise LogFormatError(bag, f"--imu-axis must be auto, x, y, z, -x, -y or -z, got {imu_axis!r}")
+    notes, warnings = [f"imported from bag {bag.name}"], []
+    wheels, fixes, rates = [], [], []
+    kind = None
+    fix_frame, no_fix = None, 0
+    try:
+        with _reader(bag) as reader:
+            conns = list(reader.connections)
+            present = {c.topic for c in conns}
+            missing = {t for t in (wheel_topic, gps_topic, imu_topic) if t} - present
+            if missing:
+                raise LogFormatError(bag, f"topic(s) {sorted(missing)} not in the bag (it has {sorted(present)}; "
+                                          "odomgraph import rosbag BAG --list shows them)")
+            cands = _candidates(conns)
+            picks = _pick(cands)
+            chosen = {}
+            for role, given in (("wheels", wheel_topic), ("imu", imu_topic), ("gps", gps_topic)):
+                if given is None:
+                    given = picks[role]
+                    if given is None and cands[role] and role == "wheels":
+                        raise LogFormatError(bag, "no topic is clearly the wheels' own odometry among "
+                                                  f"{sorted({c.topic for c in cands[role]})}: give --wheel-topic")
+                    if given is None and len({c.topic for c in cands[role]}) > 1:
+                        warnings.append(f"several {role} topics ({sorted({c.topic for c in cands[role]})}): none "
+                                        f"imported; give --{'imu' if role == 'imu' else 'gps'}-topic")
+                    if given:
+                        notes.append(f"{role}: picked {given}")
+                chosen[role] = given or None
+            if chosen["wheels"] is None:
+                raise LogFormatError(bag, "no wheel topic (sensor_msgs/JointState, nav_msgs/Odometry or "
+                                          "geometry_msgs/TwistStamped) in the bag; --list shows what it has")
+            types = {c.topic: c.msgtype for c in conns}
+            if types[chosen["wheels"]] not in WHEEL_TYPES:
+                raise LogFormatError(bag, f"{chosen['wheels']}: a {types[chosen['wheels']]} cannot be wheels")
+            kind = WHEEL_TYPES[types[chosen["wheels"]]]
+            for role, want in (("imu", IMU_TYPE), ("gps", GPS_TYPE)):
+                if chosen[role] and types[chosen[role]] != want:
+                    raise LogFormatError(bag, f"{chosen[role]}: a {types[chosen[role]]}, not a {want}")
+            if kind == "joints" and (wheel_radius is None or wheel_radius <= 0):
+                raise LogFormatError(bag, f"{chosen['wheels']} holds JointState wheels: give a positive "
+                                          "--wheel-radius [m]")
+            use = [c for c in conns if c.topic in chosen.values()]
+            joints = None
+            for conn, _t, raw in reader.messages(connections=use):
+                msg = reader.deserialize(raw, conn.msgtype)
+                if conn.topic == chosen["wheels"]:
+                    if kind == "joints":
+                        names = list(msg.name)
+                        if joints is None or joints[0] not in names or joints[1] not in names:
+                            joints = _wheel_joints(bag, conn.topic, names, left_joint, right_joint)
+                            il, ir = names.index(joints[0]), names.index(joints[1])
+                        pos = np.asarray(msg.position, float)
+                        vel = np.asarray(msg.velocity, float)
+                        wheels.append((_stamp(msg), *(pos[[il, ir]] if pos.size else (np.nan, np.nan)),
+                                       *(vel[[il, ir]] if vel.size else (np.nan, np.nan))))
+                    else:
+                        tw = msg.twist.twist if kind == "odometry" else msg.twist
+                        wheels.append((_stamp(msg), tw.linear.x, tw.angular.z, np.nan, np.nan))
+                elif conn.topic == chosen["gps"]:
+                    fix_frame = msg.header.frame_id.lstrip("/")
+                    if msg.status.status < 0:
+                        no_fix += 1
+                        continue
+                    cov = np.asarray(msg.position_covariance, float)
+                    sig = float(np.sqrt(0.5 * (cov[0] + cov[4]))) if msg.position_covariance_type > 0 else np.nan
+                    fixes.append((_stamp(msg), msg.latitude, msg.longitude, sig))
+                else:
+                    a = msg.angular_velocity
+                    rates.append((_stamp(msg), a.x, a.y, a.z))
+            frames = _static_frames(reader, conns)
+    except LogFormatError:
+        raise
+    except Exception as exc:  # rosbags raises its own types for unreadable bags
+        raise LogFormatError(bag, f"cannot read the bag: {exc}") from None
+    ws = _wheel_speeds(bag, chosen["wheels"], kind, wheels, wheel_radius, track_width)
+    if kind != "joints":
+        notes.append(f"wheels from the {kind} twist of {chosen['wheels']} through the nominal track "
+                     f"({track_width:g} m): this assumes that odometry came from the wheels alone")
+    gps, origin, gps_sigma = None, None, 0.05
+    if no_fix:
+        notes.append(f"{chosen['gps']}: {no_fix} messages without a fix (status < 0) dropped")
     if fixes:
         f = np.array(fixes)
         tf, lat, lon, sig = _increasing(f[:, 0], f[:, 1], f[:, 2], f[:, 3])
         origin = (float(lat[0]), float(lon[0]))
         x, y = latlon_to_local(lat, lon, *origin)
         if np.all(np.isfinite(sig)) and np.all(sig > 0):
-            gps = Gps(tf, x, y, sig)
-            gps_sigma = float(np.median(sig))
+            gps, gps_sigma = Gps(tf, x, y, sig), float(np.median(sig))
         else:
             gps = Gps(tf, x, y)
+        if gps_lever_arm is None:
+            gps_lever_arm = _lever_from_tf(frames, fix_frame, notes)
     gyro = None
     if rates:
         g = np.array(rates)
-        tg, om = _increasing(g[:, 0], g[:, 1])
+        tg, wx, wy, wz = _increasing(g[:, 0], g[:, 1], g[:, 2], g[:, 3])
+        om, line = _yaw_axis(imu_axis, ws, track_width, tg, {"x": wx, "y": wy, "z": wz}, chosen["imu"])
+        if line:
+            warnings.append(line)
         gyro = Gyro(tg, om)
     robot = RobotConfig(ticks_per_meter_left=1.0, ticks_per_meter_right=1.0, track_width=track_width,
                         encoder_sigma=tuple(encoder_sigma), gps_sigma=gps_sigma, gps_origin=origin,
-                        gps_lever_arm=tuple(float(v) for v in gps_lever_arm),
+                        gps_lever_arm=tuple(float(v) for v in (gps_lever_arm or (0.0, 0.0))),
                         gyro_sigma=gyro_sigma)
-    return Log(robot=robot, wheel_speeds=ws, gps=gps, gyro=gyro, notes=(f"imported from bag {bag.name}",))
+    return Log(robot=robot, wheel_speeds=ws, gps=gps, gyro=gyro, notes=tuple(notes), warnings=tuple(warnings))
+
+
+def _wheel_speeds(bag, topic, kind, rows, wheel_radius, track_width) -> WheelSpeeds:
+    if len(rows) < 2:
+        raise LogFormatError(bag, f"{topic}: fewer than two wheel messages")
+    j = np.array(rows)
+    t, a, b, vl, vr = _increasing(j[:, 0], j[:, 1], j[:, 2], j[:, 3], j[:, 4])
+    if kind != "joints":
+        v, om = a, b
+        return WheelSpeeds(t, v - 0.5 * track_width * om, v + 0.5 * track_width * om)
+    if np.all(np.isfinite(a)) and np.all(np.isfinite(b)):
+        dt = np.diff(t)
+        return WheelSpeeds(0.5 * (t[1:] + t[:-1]), np.diff(a) * wheel_radius / dt, np.diff(b) * wheel_radius / dt)
+    if np.all(np.isfinite(vl)) and np.all(np.isfinite(vr)):
+        return WheelSpeeds(t, vl * wheel_radius, vr * wheel_radius)
+    raise LogFormatError(bag, f"{topic}: JointState has neither positions nor velocities for the wheels")
+
+
+def _lever_from_tf(frames, fix_frame, notes) -> tuple[float, float]:
+    """The antenna's (x, y) in base_link from /tf_static, or (0, 0) with a note."""
+    for parent in ("base_link", "base_footprint"):
+        v = frames.get((parent, fix_frame)) if fix_frame else None
+        if v is not None:
+            notes.append(f"GPS lever arm ({v[0]:+.3f}, {v[1]:+.3f}) m from /tf_static {parent} -> {fix_frame}")
+            return v[0], v[1]
+    notes.append("GPS lever arm not in /tf_static: taken as (0, 0); give --gps-lever-arm if the antenna is "
+                 "off the robot's centre")
+    return 0.0, 0.0
+
+
+def _yaw_axis(axis: str, ws: WheelSpeeds, track: float, t: np.ndarray, rates: dict, topic: str):
+    """(yaw rate (N,) [rad/s], warning or None): the requested axis, or with
+    "auto" the signed axis that follows the wheels' turn rate best."""
+    if axis != "auto":
+        sign = -1.0 if axis.startswith("-") else 1.0
+        return sign * rates[axis[-1]], None
+    w = np.interp(t, ws.t, (ws.v_right - ws.v_left) / track)
+    inside = (t >= ws.t[0]) & (t <= ws.t[-1])
+    if inside.sum() < 30 or np.std(w[inside]) < MIN_TURN:
+        return rates["z"], None
+    corr = {a: (float(np.corrcoef(rates[a][inside], w[inside])[0, 1]) if np.std(rates[a][inside]) > 0 else 0.0)
+            for a in AXES}
+    best = max(AXES, key=lambda a: abs(corr[a]))
+    if best == "z" and corr["z"] > 0:
+        return rates["z"], None
+    if abs(corr[best]) < 0.3 or (best != "z" and abs(corr[best]) < 2.0 * abs(corr["z"])):
+        return rates["z"], (f"{topic}: no IMU axis follows the wheels' turn rate clearly (correlations "
+                            + ", ".join(f"{a} {c:+.2f}" for a, c in corr.items()) + "): z taken; check the mounting")
+    sign = 1.0 if corr[best] > 0 else -1.0
+    name = ("" if sign > 0 else "-") + best
+    return sign * rates[best], (f"{topic}: yaw taken from the IMU's {name} axis, which follows the wheels' turn rate "
+                                f"(correlation {abs(corr[best]):.2f}; z {corr['z']:+.2f}): the IMU is mounted "
+                                "turned; --imu-axis z keeps z")

@@ -1,0 +1,97 @@
+"""Mounting and wiring mistakes that the data give away.
+
+A gyro mounted upside down, its yaw on another axis, rates in degrees per
+second, or the left and right encoders swapped all leave a log that is
+valid by the contract and an estimate that is wrong with a tight sigma
+(issue 12: a gyro on the wrong axis gave a track scale of 0.49 +- 0.025 and
+no warning). Each check compares two sensors that must agree:
+
+- the gyro against the wheels' turn rate (nominal parameters): the sign,
+  the correlation, and a ratio near 180/pi;
+- the wheels against the fixes: which way the fixes' course turns, step by
+  step, against the wheels' heading. Swapped encoders (or a mirrored GPS
+  frame) turn every turn the other way; with a gyro as the third witness,
+  the odd one out is named.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+#: Turning this fast [rad/s] (standard deviation of the wheels' yaw rate) is
+#: needed before the gyro can be judged against the wheels.
+MIN_TURN = 0.05
+#: The fewest gyro samples judged.
+MIN_SAMPLES = 30
+#: Below this correlation with the wheels' yaw rate the gyro does not measure yaw.
+MIN_CORRELATION = 0.3
+#: Below minus this correlation, the fixes turn the other way from the wheels.
+FIX_CORRELATION = 0.5
+
+
+def mounting_warnings(log) -> list[str]:
+    """One line per mounting or wiring mistake that the log shows."""
+    from odomgraph.analysis.holdout import wheel_yaw_rate_at_gyro
+    fix_c = fix_turn_correlation(log)
+    gyro_c, slope = None, None
+    rate = wheel_yaw_rate_at_gyro(log)
+    if rate is not None:
+        _, g, w = rate
+        if len(g) >= MIN_SAMPLES and np.std(w) >= MIN_TURN and np.std(g) > 0:
+            gyro_c = float(np.corrcoef(g, w)[0, 1])
+            slope = float(np.cov(g, w)[0, 1] / np.var(w, ddof=1))
+    out = []
+    fixes_against = fix_c is not None and fix_c < -FIX_CORRELATION
+    if fixes_against:
+        if gyro_c is not None and gyro_c < -MIN_CORRELATION:
+            out.append(f"the fixes and the gyro both turn against the wheels (correlations {fix_c:.2f}, {gyro_c:.2f}): "
+                       "the left and right encoders look swapped")
+        elif gyro_c is not None and gyro_c > MIN_CORRELATION:
+            out.append(f"the fixes turn against the wheels and the gyro (correlation {fix_c:.2f}): the GPS frame looks "
+                       "mirrored (x and y, or lat and lon, swapped)")
+        else:
+            out.append(f"the fixes turn against the wheels (correlation {fix_c:.2f}): the left and right encoders are "
+                       "swapped, or the GPS frame is mirrored")
+    if gyro_c is None:
+        return out
+    if gyro_c < -MIN_CORRELATION and not fixes_against:
+        out.append(f"the gyro turns against the wheels (correlation {gyro_c:.2f}): the gyro is mounted upside down "
+                   "or its sign is flipped" + ("" if fix_c is not None else
+                                               ", or the left and right wheels are swapped"))
+    elif abs(gyro_c) < MIN_CORRELATION:
+        out.append(f"the gyro does not follow the wheels' turn rate (correlation {gyro_c:.2f}): its yaw is on another "
+                   "axis than the log says, or it is not in rad/s")
+    elif gyro_c > 0 and 40.0 < slope < 80.0:
+        out.append(f"the gyro reads {slope:.0f}x the wheels' turn rate: it looks like degrees per second, and the "
+                   "log must hold rad/s")
+    return out
+
+
+def fix_turn_correlation(log, step: float = 1.0) -> float | None:
+    """Correlation between how the fixes' course turns and how the wheels'
+    heading turns, over ``step``-second steps [-1..1]; None when the fixes are
+    too few or the robot turns too little to tell. Independent of the scale
+    factors (they change how much, not which way), and of driving backwards
+    (the course is then off by pi, its changes are not)."""
+    from odomgraph.estimators.measurements import clean, dead_reckoning, from_log
+    if log.gps is None or len(log.gps.t) < 20:
+        return None
+    log = clean(log)[0]
+    g = log.gps
+    t_dr, dr = dead_reckoning(from_log(log), log.robot.track_width)
+    lo, hi = max(g.t[0], t_dr[0]), min(g.t[-1], t_dr[-1])
+    if hi - lo < 10 * step or np.median(np.diff(g.t)) > step:
+        return None
+    grid = np.arange(lo, hi, step)
+    x, y = np.interp(grid, g.t, g.x), np.interp(grid, g.t, g.y)
+    dx, dy = np.diff(x), np.diff(y)
+    sig = float(np.median(g.sigma)) if g.sigma is not None else log.robot.gps_sigma
+    moving = np.hypot(dx, dy) > max(6.0 * sig, 0.05)
+    course = np.arctan2(dy, dx)
+    ok = moving[:-1] & moving[1:]
+    d_course = np.angle(np.exp(1j * np.diff(course)))[ok]
+    mid = 0.5 * (grid[:-1] + grid[1:])
+    heading = np.interp(mid, t_dr, dr[:, 2])
+    d_heading = np.diff(heading)[ok]
+    if d_course.size < MIN_SAMPLES // 2 or np.std(d_heading) < MIN_TURN * step or np.std(d_course) == 0:
+        return None
+    return float(np.corrcoef(d_course, d_heading)[0, 1])
