@@ -569,6 +569,13 @@ def calibrate_to_file(log: Log, out: Path, schedule: Schedule = Schedule(calibra
     from odomgraph.io.robot import robot_toml
     inputs = (log.path,) if log.path else ()
     check_output(out, inputs, directory=False)
+    if not force:
+        # A mounting mistake shows in the data before any fit: say it now.
+        from odomgraph.analysis.mounting import mounting_warnings
+        found = mounting_warnings(log)
+        if found:
+            raise CalibrationRejectedError(f"{out} not written: {'; '.join(found)} (--force calibrates and writes "
+                                           "it anyway)")
     new, rep = calibrate(log, schedule, method, progress, tune, **options)
     if rep["problems"] and not force:
         raise CalibrationRejectedError(f"{out} not written: {'; '.join(rep['problems'])} (--force writes it anyway)")

@@ -130,8 +130,8 @@ def test_calibrate_cli_exits_1_in_one_line_and_writes_nothing(tmp_path):
     r = CliRunner().invoke(app, ["calibrate", str(d), "-o", str(out), "--calibrate-until", "20", "--no-tune"])
     assert r.exit_code == 1, r.output
     lines = [ln for ln in r.output.splitlines() if ln.startswith("odomgraph: error")]
-    # the smoother's track scale goes through zero; the error names the cause
-    assert len(lines) == 1 and "not physical" in lines[0] and "degrees per second" in lines[0], lines
+    # refused before any fit, with the cause and the way out
+    assert len(lines) == 1 and "degrees per second" in lines[0] and "--force" in lines[0], lines
     assert not out.exists()
     # a mirrored GPS frame: the smoother finishes, the check refuses, --force is offered
     g = log.gps
