@@ -151,7 +151,7 @@ def main():
 
 
 RUNS = {"square": "231220200029_run-01.csv", "circular": "231220200141_run-01.csv", "free": "020120212354_run-01.csv"}
-JACKAL = Path(__file__).resolve().parents[2] / "shared" / "data" / "bags" / "jackal-test2.bag"
+JACKAL = DATA / "bags" / "jackal-test2.bag"
 
 
 def _row(est, lg):

@@ -231,10 +231,9 @@ def test_joint_names_are_found_and_a_missing_radius_is_said(bag):
         import_rosbag(path, left_joint="l", right_joint="r", wheel_radius=R_WHEEL, track_width=0.6)
 
 
-JACKAL = Path(__file__).resolve().parents[2] / "shared" / "data" / "bags" / "jackal-test2.bag"
+JACKAL = Path(__file__).resolve().parent / "data" / "bags" / "jackal-test2.bag"
 
 
-@pytest.mark.skipif(not JACKAL.exists(), reason="the shared Jackal bag is not on this machine")
 def test_the_jackal_bag_calibrates_ratio_and_track_and_holds_the_common_scale(tmp_path):
     """The real wheels + IMU bag (nav_msgs/Odometry, no absolute sensor):
     the common scale is not determined and stays nominal; the track is."""
