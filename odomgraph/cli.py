@@ -605,10 +605,13 @@ def import_(
     imu_topic: Annotated[Optional[str], typer.Option(
         help="rosbag: sensor_msgs/Imu topic (default: the one there is; '' for none).")] = None,
     imu_axis: Annotated[str, typer.Option(
-        help="rosbag: the IMU axis that measures yaw: auto (the signed axis that follows the wheels' turn "
-             "rate), x, y, z, -x, -y or -z.")] = "auto",
+        help="rosbag: the IMU axis that measures yaw: auto (the mounting in /tf_static, else the signed axis "
+             "that follows the wheels' turn rate), x, y, z, -x, -y or -z.")] = "auto",
     gps_lever_arm: Annotated[Optional[str], typer.Option(
         help="rosbag: GPS antenna 'x,y' in the robot frame [m] (default: from /tf_static, else 0,0).")] = None,
+    stamps: Annotated[str, typer.Option(
+        help="rosbag: time stamps from the message headers (the sensors' clock) or the bag's receive time: "
+             "header or receive.")] = "header",
 ):
     """Convert another dataset's files into a log directory (LOG_FORMAT.md)."""
     from odomgraph.errors import OdomgraphError
@@ -647,7 +650,7 @@ def import_(
             except (ValueError, AssertionError):
                 raise OdomgraphError(f"--gps-lever-arm: expected 'x,y' in metres, got {gps_lever_arm!r}") from None
         log = import_rosbag(source, wheel_topic, left_joint, right_joint, wheel_radius, track_width,
-                            gps_topic, imu_topic, gps_lever_arm=lever, imu_axis=imu_axis)
+                            gps_topic, imu_topic, gps_lever_arm=lever, imu_axis=imu_axis, stamps=stamps)
     else:
         from odomgraph.io.importers.librsf import import_librsf
         log = import_librsf(source, ground_truth)

@@ -19,11 +19,15 @@ LAT0, LON0, R_WHEEL = 41.5045, -81.6086, 0.15
 
 
 def _write_bag(path, log, wheels="joints", imu_axis="z", tf_lever=None, no_fix_every=0, t0=0.0,
-               extra_odom=False):
+               extra_odom=False, storage="sqlite3", imu_tf=False):
     """A ROS 2 bag of ``log``: wheels as JointState positions or as the
     nav_msgs/Odometry twist; the gyro on IMU axis ``imu_axis`` ("-z": upside
     down); optionally /tf_static base_link -> gps with ``tf_lever``, every
-    ``no_fix_every``-th fix without a fix (status -1), stamps moved by t0."""
+    ``no_fix_every``-th fix without a fix (status -1), stamps moved by t0.
+    ``wheels="twist"`` writes geometry_msgs/TwistStamped; ``imu_tf`` writes
+    the IMU's mounting (yaw axis ``imu_axis``) into /tf_static; ``storage``:
+    sqlite3 or mcap."""
+    from rosbags.rosbag2 import StoragePlugin
     from rosbags.rosbag2 import Writer
     from rosbags.typesys import Stores, get_typestore
     ts = get_typestore(Stores.ROS2_HUMBLE)
@@ -37,7 +41,8 @@ def _write_bag(path, log, wheels="joints", imu_axis="z", tf_lever=None, no_fix_e
     s2 = np.sin(np.radians(LAT0)) ** 2
     M, N = a * (1 - e2) / (1 - e2 * s2) ** 1.5, a / np.sqrt(1 - e2 * s2)
     V3, Q = T["geometry_msgs/msg/Vector3"], T["geometry_msgs/msg/Quaternion"]
-    with Writer(path, version=8) as w:
+    plugin = StoragePlugin.MCAP if storage == "mcap" else StoragePlugin.SQLITE3
+    with Writer(path, version=8, storage_plugin=plugin) as w:
         cg = w.add_connection("/fix", "sensor_msgs/msg/NavSatFix", typestore=ts)
         ci = w.add_connection("/imu", "sensor_msgs/msg/Imu", typestore=ts)
         e, r = log.encoders, log.robot
@@ -51,6 +56,15 @@ def _write_bag(path, log, wheels="joints", imu_axis="z", tf_lever=None, no_fix_e
                                                       position=np.array([0.3, al, ar]), velocity=np.array([], float),
                                                       effort=np.array([], float))
                 w.write(cj, int((t + t0) * 1e9), ts.serialize_cdr(msg, "sensor_msgs/msg/JointState"))
+        elif wheels == "twist":
+            ct = w.add_connection("/cmd_vel_measured", "geometry_msgs/msg/TwistStamped", typestore=ts)
+            dt = np.diff(e.t)
+            vl, vr = e.ticks_left[1:] / (r.ticks_per_meter_left * dt), e.ticks_right[1:] / (r.ticks_per_meter_right * dt)
+            for t, vi, wi in zip(e.t[1:], 0.5 * (vl + vr), (vr - vl) / r.track_width):
+                msg = T["geometry_msgs/msg/TwistStamped"](
+                    header=header(t + t0), twist=T["geometry_msgs/msg/Twist"](linear=V3(x=vi, y=0.0, z=0.0),
+                                                                             angular=V3(x=0.0, y=0.0, z=wi)))
+                w.write(ct, int((t + t0) * 1e9), ts.serialize_cdr(msg, "geometry_msgs/msg/TwistStamped"))
         else:
             topics = ["/diff_drive_controller/odom"] + (["/odometry/filtered"] if extra_odom else [])
             conns = [w.add_connection(tp, "nav_msgs/msg/Odometry", typestore=ts) for tp in topics]
@@ -69,13 +83,23 @@ def _write_bag(path, log, wheels="joints", imu_axis="z", tf_lever=None, no_fix_e
                              covariance=np.zeros(36)))
                 for c in conns:
                     w.write(c, int((t + t0) * 1e9), ts.serialize_cdr(msg, "nav_msgs/msg/Odometry"))
+        trs = []
         if tf_lever is not None:
-            ct = w.add_connection("/tf_static", "tf2_msgs/msg/TFMessage", typestore=ts)
-            tr = T["geometry_msgs/msg/TransformStamped"](
+            trs.append(T["geometry_msgs/msg/TransformStamped"](
                 header=header(t0), child_frame_id="gps",
                 transform=T["geometry_msgs/msg/Transform"](translation=V3(x=tf_lever[0], y=tf_lever[1], z=0.5),
-                                                           rotation=Q(x=0.0, y=0.0, z=0.0, w=1.0)))
-            w.write(ct, int(t0 * 1e9), ts.serialize_cdr(T["tf2_msgs/msg/TFMessage"](transforms=[tr]),
+                                                           rotation=Q(x=0.0, y=0.0, z=0.0, w=1.0))))
+        if imu_tf:
+            # the rotation that takes the IMU's yaw axis onto base_link's z
+            h = np.sqrt(0.5)
+            q = {"x": Q(x=0.0, y=-h, z=0.0, w=h), "y": Q(x=h, y=0.0, z=0.0, w=h), "z": Q(x=0.0, y=0.0, z=0.0, w=1.0),
+                 "-z": Q(x=1.0, y=0.0, z=0.0, w=0.0)}[imu_axis]
+            trs.append(T["geometry_msgs/msg/TransformStamped"](
+                header=header(t0), child_frame_id="imu_link",
+                transform=T["geometry_msgs/msg/Transform"](translation=V3(x=0.1, y=0.0, z=0.2), rotation=q)))
+        if trs:
+            ct = w.add_connection("/tf_static", "tf2_msgs/msg/TFMessage", typestore=ts)
+            w.write(ct, int(t0 * 1e9), ts.serialize_cdr(T["tf2_msgs/msg/TFMessage"](transforms=trs),
                                                         "tf2_msgs/msg/TFMessage"))
         g = log.gps
         for k, (t, x, y) in enumerate(zip(g.t, g.x, g.y)):
@@ -93,7 +117,9 @@ def _write_bag(path, log, wheels="joints", imu_axis="z", tf_lever=None, no_fix_e
         sign = -1.0 if imu_axis.startswith("-") else 1.0
         for t, om in zip(log.gyro.t, log.gyro.omega):
             rate = {a: (sign * om if a == imu_axis[-1] else 0.001 * np.sin(7 * t)) for a in "xyz"}
-            msg = T["sensor_msgs/msg/Imu"](header=header(t + t0), orientation=Q(x=0.0, y=0.0, z=0.0, w=1.0),
+            hd = header(t + t0)
+            hd.frame_id = "imu_link"
+            msg = T["sensor_msgs/msg/Imu"](header=hd, orientation=Q(x=0.0, y=0.0, z=0.0, w=1.0),
                                            orientation_covariance=np.zeros(9), angular_velocity=V3(**rate),
                                            angular_velocity_covariance=np.zeros(9),
                                            linear_acceleration=V3(x=0.0, y=0.0, z=9.81),
@@ -249,3 +275,37 @@ def test_the_jackal_bag_calibrates_ratio_and_track_and_holds_the_common_scale(tm
     h = rep["held_out"]
     assert h["kind"] == "gyro" and h["calibrated"] < h["nominal"]
     assert any("scale_common is not determined" in w for w in rep["warnings"])
+
+
+@pytest.mark.parametrize("storage", ["sqlite3", "mcap"])
+@pytest.mark.parametrize("wheels,imu_axis,imu_tf", [("joints", "x", True), ("odometry", "y", False),
+                                                     ("twist", "x", False), ("twist", "-z", True)])
+def test_every_format_wheel_type_and_imu_mounting_calibrates_back(tmp_path, storage, wheels, imu_axis, imu_tf):
+    """ROS 2 sqlite3 and mcap (ROS 1 .bag: the Jackal test); JointState,
+    Odometry and TwistStamped wheels; the IMU's yaw on another axis, found
+    through /tf_static or from the data. Each calibrates back to 0.5 %."""
+    seed = {"joints": 6, "odometry": 7, "twist": 8}[wheels]
+    src = simulate(paper(60).with_(slips=()), seed)
+    p = tmp_path / f"{wheels}-{storage}"
+    _write_bag(p, src, wheels=wheels, imu_axis=imu_axis, imu_tf=imu_tf, storage=storage, tf_lever=(-0.45, 0.0),
+               no_fix_every=15)
+    log = import_rosbag(p, wheel_radius=R_WHEEL, track_width=src.robot.track_width)
+    np.testing.assert_allclose(log.gyro.omega, src.gyro.omega, atol=1e-9)
+    if imu_tf:
+        assert log.warnings == () and any("through /tf_static" in n for n in log.notes)
+    else:
+        assert len(log.warnings) == 1 and f"IMU's {imu_axis} axis" in log.warnings[0]
+    assert log.robot.gps_lever_arm == (-0.45, 0.0)
+    est = estimate(log, Method.batch, Schedule(None))
+    for got, true in zip(est.mean[-1, 8:11], src.truth_scales):
+        assert got == pytest.approx(true, rel=0.005)
+
+
+def test_receive_stamps_are_an_option(odom_bag):
+    path, src = odom_bag
+    hdr = import_rosbag(path, track_width=src.robot.track_width)
+    rx = import_rosbag(path, track_width=src.robot.track_width, stamps="receive")
+    # the test bag records each message at its header stamp (to the nanosecond)
+    np.testing.assert_allclose(rx.wheel_speeds.t, hdr.wheel_speeds.t, atol=2e-6, rtol=0)
+    with pytest.raises(LogFormatError, match="--stamps must be header or receive"):
+        import_rosbag(path, track_width=0.6, stamps="arrival")

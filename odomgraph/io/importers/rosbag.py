@@ -20,7 +20,8 @@ Topics are picked by their type when the choice is unambiguous, or given:
   A mounted IMU often reports yaw on another axis (issue 13: a robot's y
   axis correlated 0.86 with its odometry's yaw rate against 0.01 for z), so
   by default the axis and sign that follow the wheels' turn rate are taken,
-  with a warning when that is not +z.
+  with a warning when that is not +z; the mounting in /tf_static
+  (base_link -> the IMU's frame) is used when the bag has it.
 
 Times are the messages' header stamps, the clock the sensors share; bags on
 a real clock start near 1.7e9 s, where float64 keeps 0.2 us.
@@ -43,6 +44,8 @@ IMU_TYPE, GPS_TYPE, TF_TYPE = "sensor_msgs/msg/Imu", "sensor_msgs/msg/NavSatFix"
 #: Topic names that are never picked as wheels by themselves: fused, not wheel, odometry.
 NOT_WHEELS = ("filtered", "ekf", "fused", "global", "gps", "visual", "vo", "slam")
 AXES = ("x", "y", "z")
+#: The robot's own frame, as ROS names it (REP 105).
+BASE_FRAMES = ("base_link", "base_footprint")
 #: The wheels must turn this much (std of yaw rate [rad/s]) for the IMU axis to be chosen from the data.
 MIN_TURN = 0.05
 
@@ -131,20 +134,30 @@ def list_topics(bag: Path | str) -> tuple[list[Topic], list[str]]:
         raise
     except Exception as exc:  # rosbags raises its own types for unreadable bags
         raise LogFormatError(bag, f"cannot read the bag: {exc}") from None
-    return topics, [f"{p} -> {c} ({x:+.3f}, {y:+.3f}, {z:+.3f}) m" for (p, c), (x, y, z) in sorted(frames.items())]
+    return topics, [f"{p} -> {c} ({x:+.3f}, {y:+.3f}, {z:+.3f}) m" for (p, c), ((x, y, z), _) in sorted(frames.items())]
 
 
-def _static_frames(reader, conns) -> dict[tuple[str, str], tuple[float, float, float]]:
-    """{(parent, child): translation [m]} from /tf_static."""
+def _static_frames(reader, conns) -> dict[tuple[str, str], tuple[tuple[float, float, float], np.ndarray]]:
+    """{(parent, child): (translation [m], rotation (3, 3) child -> parent)} from /tf_static."""
     out = {}
     tf = [c for c in conns if c.msgtype == TF_TYPE and c.topic == "/tf_static"]
     if not tf:   # messages(connections=[]) would read every message
         return out
     for conn, _t, raw in reader.messages(connections=tf):
         for tr in reader.deserialize(raw, conn.msgtype).transforms:
-            v = tr.transform.translation
-            out[(tr.header.frame_id.lstrip("/"), tr.child_frame_id.lstrip("/"))] = (v.x, v.y, v.z)
+            v, q = tr.transform.translation, tr.transform.rotation
+            out[(tr.header.frame_id.lstrip("/"), tr.child_frame_id.lstrip("/"))] = (
+                (v.x, v.y, v.z), _rotation(q.x, q.y, q.z, q.w))
     return out
+
+
+def _rotation(x: float, y: float, z: float, w: float) -> np.ndarray:
+    """(3, 3) rotation matrix of a unit quaternion (x, y, z, w), normalised first."""
+    n = np.sqrt(x * x + y * y + z * z + w * w) or 1.0
+    x, y, z, w = x / n, y / n, z / n, w / n
+    return np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+                     [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+                     [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)]])
 
 
 def _wheel_joints(bag: Path, topic: str, names: list[str], left: str | None, right: str | None) -> tuple[str, str]:
@@ -166,7 +179,8 @@ def _wheel_joints(bag: Path, topic: str, names: list[str], left: str | None, rig
 def import_rosbag(bag: Path | str, wheel_topic: str | None = None, left_joint: str | None = None,
                   right_joint: str | None = None, wheel_radius: float | None = None, track_width: float | None = None,
                   gps_topic: str | None = None, imu_topic: str | None = None, gyro_sigma: float = 0.01,
-                  encoder_sigma=(0.005, 0.01), gps_lever_arm=None, imu_axis: str = "auto") -> Log:
+                  encoder_sigma=(0.005, 0.01), gps_lever_arm=None, imu_axis: str = "auto",
+                  stamps: str = "header") -> Log:
     """Import wheels (and GPS and gyro when the bag has them) from a bag; see the module doc.
 
     Topics left None are picked by type when unambiguous ("" turns a sensor
@@ -174,16 +188,21 @@ def import_rosbag(bag: Path | str, wheel_topic: str | None = None, left_joint: s
     ``track_width`` [m] always. ``gps_lever_arm`` (robot frame [m]) is not in
     NavSatFix: by default it is taken from /tf_static (base_link to the fix's
     frame) when there, else (0, 0) with a note. ``imu_axis``: "auto", or one
-    of x, y, z, -x, -y, -z."""
+    of x, y, z, -x, -y, -z; "auto" takes the robot's vertical axis from
+    /tf_static (base_link -> the IMU's frame) when it is there, else the
+    axis the data show. ``stamps``: "header" (the sensors' clock) or
+    "receive" (the time the bag recorded each message)."""
     bag = Path(bag)
     if track_width is None or track_width <= 0:
         raise LogFormatError(bag, "import rosbag needs a positive --track-width (the nominal robot) [m]")
+    if stamps not in ("header", "receive"):
+        raise LogFormatError(bag, f"--stamps must be header or receive, got {stamps!r}")
     if imu_axis not in ("auto", *AXES, *(f"-{a}" for a in AXES)):
         raise LogFormatError(bag, f"--imu-axis must be auto, x, y, z, -x, -y or -z, got {imu_axis!r}")
     notes, warnings = [f"imported from bag {bag.name}"], []
     wheels, fixes, rates = [], [], []
     kind = None
-    fix_frame, no_fix = None, 0
+    fix_frame, imu_frame, no_fix = None, None, 0
     try:
         with _reader(bag) as reader:
             conns = list(reader.connections)
@@ -222,8 +241,9 @@ def import_rosbag(bag: Path | str, wheel_topic: str | None = None, left_joint: s
                                           "--wheel-radius [m]")
             use = [c for c in conns if c.topic in chosen.values()]
             joints = None
-            for conn, _t, raw in reader.messages(connections=use):
+            for conn, t_rx, raw in reader.messages(connections=use):
                 msg = reader.deserialize(raw, conn.msgtype)
+                stamp = 1e-9 * t_rx if stamps == "receive" else _stamp(msg)
                 if conn.topic == chosen["wheels"]:
                     if kind == "joints":
                         names = list(msg.name)
@@ -232,11 +252,11 @@ def import_rosbag(bag: Path | str, wheel_topic: str | None = None, left_joint: s
                             il, ir = names.index(joints[0]), names.index(joints[1])
                         pos = np.asarray(msg.position, float)
                         vel = np.asarray(msg.velocity, float)
-                        wheels.append((_stamp(msg), *(pos[[il, ir]] if pos.size else (np.nan, np.nan)),
+                        wheels.append((stamp, *(pos[[il, ir]] if pos.size else (np.nan, np.nan)),
                                        *(vel[[il, ir]] if vel.size else (np.nan, np.nan))))
                     else:
                         tw = msg.twist.twist if kind == "odometry" else msg.twist
-                        wheels.append((_stamp(msg), tw.linear.x, tw.angular.z, np.nan, np.nan))
+                        wheels.append((stamp, tw.linear.x, tw.angular.z, np.nan, np.nan))
                 elif conn.topic == chosen["gps"]:
                     fix_frame = msg.header.frame_id.lstrip("/")
                     if msg.status.status < 0:
@@ -244,10 +264,11 @@ def import_rosbag(bag: Path | str, wheel_topic: str | None = None, left_joint: s
                         continue
                     cov = np.asarray(msg.position_covariance, float)
                     sig = float(np.sqrt(0.5 * (cov[0] + cov[4]))) if msg.position_covariance_type > 0 else np.nan
-                    fixes.append((_stamp(msg), msg.latitude, msg.longitude, sig))
+                    fixes.append((stamp, msg.latitude, msg.longitude, sig))
                 else:
+                    imu_frame = msg.header.frame_id.lstrip("/")
                     a = msg.angular_velocity
-                    rates.append((_stamp(msg), a.x, a.y, a.z))
+                    rates.append((stamp, a.x, a.y, a.z))
             frames = _static_frames(reader, conns)
     except LogFormatError:
         raise
@@ -275,9 +296,16 @@ def import_rosbag(bag: Path | str, wheel_topic: str | None = None, left_joint: s
     if rates:
         g = np.array(rates)
         tg, wx, wy, wz = _increasing(g[:, 0], g[:, 1], g[:, 2], g[:, 3])
-        om, line = _yaw_axis(imu_axis, ws, track_width, tg, {"x": wx, "y": wy, "z": wz}, chosen["imu"])
-        if line:
-            warnings.append(line)
+        mount = next((frames[(p, imu_frame)][1] for p in BASE_FRAMES if (p, imu_frame) in frames), None)
+        if imu_axis == "auto" and mount is not None:
+            # The robot's yaw rate is the z row of the rotation into base_link.
+            om = mount[2] @ np.stack([wx, wy, wz])
+            notes.append(f"yaw from the IMU frame {imu_frame!r} through /tf_static (its vertical in the IMU frame: "
+                         f"{np.round(mount[2], 3).tolist()})")
+        else:
+            om, line = _yaw_axis(imu_axis, ws, track_width, tg, {"x": wx, "y": wy, "z": wz}, chosen["imu"])
+            if line:
+                warnings.append(line)
         gyro = Gyro(tg, om)
     robot = RobotConfig(ticks_per_meter_left=1.0, ticks_per_meter_right=1.0, track_width=track_width,
                         encoder_sigma=tuple(encoder_sigma), gps_sigma=gps_sigma, gps_origin=origin,
@@ -304,8 +332,8 @@ def _wheel_speeds(bag, topic, kind, rows, wheel_radius, track_width) -> WheelSpe
 
 def _lever_from_tf(frames, fix_frame, notes) -> tuple[float, float]:
     """The antenna's (x, y) in base_link from /tf_static, or (0, 0) with a note."""
-    for parent in ("base_link", "base_footprint"):
-        v = frames.get((parent, fix_frame)) if fix_frame else None
+    for parent in BASE_FRAMES:
+        v = frames.get((parent, fix_frame), (None,))[0] if fix_frame else None
         if v is not None:
             notes.append(f"GPS lever arm ({v[0]:+.3f}, {v[1]:+.3f}) m from /tf_static {parent} -> {fix_frame}")
             return v[0], v[1]
