@@ -76,10 +76,13 @@ def _window_warnings(est: Estimate, log: Log, schedule: Schedule) -> list[str]:
     if est.t[0] >= t_end:
         return [f"the calibration window (until t={t_end:.1f} s) ended before the estimator started at "
                 f"t={est.t[0]:.1f} s: nothing was calibrated in it; lengthen --calibrate-until"]
-    n = sum(int(np.sum((s.t >= est.t[0]) & (s.t < t_end))) for s in (log.gps, log.ranges, log.velocity)
-            if s is not None)
+    absolute = [s for s in (log.gps, log.ranges, log.velocity) if s is not None and len(s.t)]
+    # Without any absolute sensor the window calibrates the ratio and the
+    # track against the gyro (the common scale is reported undetermined).
+    sensors, what = (absolute, "absolute measurements") if absolute else ([log.gyro], "gyro samples")
+    n = sum(int(np.sum((s.t >= est.t[0]) & (s.t < t_end))) for s in sensors if s is not None)
     if n < MIN_WINDOW_FIXES:
-        return [f"the calibration window (t={est.t[0]:.1f}-{t_end:.1f} s) holds only {n} absolute measurements: "
+        return [f"the calibration window (t={est.t[0]:.1f}-{t_end:.1f} s) holds only {n} {what}: "
                 "too few to calibrate the scale factors in it; lengthen --calibrate-until"]
     return []
 
@@ -504,7 +507,7 @@ def _calibration_checks(log: Log, est: Estimate, k, sk, method: Method, schedule
     problems = [w for w in mounting_warnings(log)]
     unobs = est.unobservable()
     for name, v, s in zip(("scale_left", "scale_right", "scale_track"), k, sk):
-        if abs(v - 1.0) > IMPLAUSIBLE and est.calibration[name].get("observable", True):
+        if abs(v - 1.0) > IMPLAUSIBLE:
             warnings.append(f"{name} came out {v - 1.0:+.1%} from nominal ({v:.4f} +- {s:.2g}): implausible for "
                             "a tyre or track change; check the nominal ticks per metre and track width")
     ho, ho_text = None, None

@@ -262,7 +262,11 @@ JACKAL = Path(__file__).resolve().parent / "data" / "bags" / "jackal-test2.bag"
 
 def test_the_jackal_bag_calibrates_ratio_and_track_and_holds_the_common_scale(tmp_path):
     """The real wheels + IMU bag (nav_msgs/Odometry, no absolute sensor):
-    the common scale is not determined and stays nominal; the track is."""
+    the common scale is not determined and stays nominal. The odometry says
+    the robot turned 35.7 rad where the gyro says 4.8 rad (a skid-steer
+    robot turns less than its wheels say): the track scale grows, and since
+    the 5 % prior holds it far short of what the gyro asks, the result is
+    flagged as implausible rather than passed off as a calibration."""
     from odomgraph.pipeline import calibrate
     log = import_rosbag(JACKAL, track_width=0.37)
     assert log.wheel_speeds.t[0] == pytest.approx(47.584) and log.gps is None and log.warnings == ()
@@ -271,10 +275,12 @@ def test_the_jackal_bag_calibrates_ratio_and_track_and_holds_the_common_scale(tm
     # ratio and track moved; the common scale did not
     kl, kr, kt = rep["scale"]["left"], rep["scale"]["right"], rep["scale"]["track"]
     assert 0.5 * (kl + kr) == pytest.approx(1.0, abs=1e-3)
-    assert 1.05 < kt < 1.25 and rep["track_width"]["sigma"] < 0.05
+    assert kt > 1.05
+    assert any("scale_track came out +" in w and "implausible" in w for w in rep["warnings"]), rep["warnings"]
     h = rep["held_out"]
     assert h["kind"] == "gyro" and h["calibrated"] < h["nominal"]
     assert any("scale_common is not determined" in w for w in rep["warnings"])
+    assert not any("calibration window" in w for w in rep["warnings"])
 
 
 @pytest.mark.parametrize("storage", ["sqlite3", "mcap"])
