@@ -22,10 +22,34 @@ def machine() -> dict:
             "python": platform.python_version(), "numpy": numpy.__version__, "commit": commit}
 
 
+def sources() -> dict[str, str]:
+    """{path: sha256[:16]} of every project source file this process has
+    imported: what the results depend on (benchmarks.stale compares them
+    with the files as they are now)."""
+    import hashlib
+    import sys
+    root = RESULTS.parent.parent
+    out = {}
+    for mod in list(sys.modules.values()):
+        f = getattr(mod, "__file__", None)
+        if not f:
+            continue
+        p = Path(f).resolve()
+        try:
+            rel = p.relative_to(root)
+        except ValueError:
+            continue
+        if rel.parts[0] in ("odomgraph", "factors") and p.suffix == ".py":
+            out[str(rel)] = hashlib.sha256(p.read_bytes()).hexdigest()[:16]
+    return dict(sorted(out.items()))
+
+
 def save(name: str, data: dict, markdown: str) -> None:
-    """Write results/<name>.json and results/<name>.md (and print the markdown)."""
+    """Write results/<name>.json and results/<name>.md (and print the markdown).
+    The JSON records the machine, the commit and the hashes of the sources
+    the run imported."""
     RESULTS.mkdir(exist_ok=True)
-    data = {"machine": machine(), **data}
+    data = {"machine": machine(), "sources": sources(), **data}
     (RESULTS / f"{name}.json").write_text(json.dumps(data, indent=2) + "\n")
     (RESULTS / f"{name}.md").write_text(markdown + "\n")
     print(markdown)
