@@ -9,3 +9,18 @@ Library first: every CLI command is a function here.
 * ``odomgraph.analysis``: metrics against truth, consistency, plots.
 """
 __version__ = "0.1.0"
+
+#: The public API, imported on first use (``import odomgraph`` stays light):
+#: ``odomgraph.read_log(DIR)``, ``odomgraph.estimate(log, "batch")``,
+#: ``odomgraph.calibrate(log)``, ``odomgraph.simulate(scenario, seed)``.
+_API = {"read_log": "odomgraph.io.log", "write_log": "odomgraph.io.log", "estimate": "odomgraph.pipeline",
+        "calibrate": "odomgraph.pipeline", "Method": "odomgraph.pipeline", "Schedule": "odomgraph.estimators.schedule",
+        "simulate": "odomgraph.sim.simulate", "Estimate": "odomgraph.estimators.result"}
+__all__ = ["__version__", *_API]
+
+
+def __getattr__(name: str):
+    if name in _API:
+        import importlib
+        return getattr(importlib.import_module(_API[name]), name)
+    raise AttributeError(f"module 'odomgraph' has no attribute {name!r}")

@@ -509,3 +509,20 @@ def test_montecarlo_workers_stop_with_their_parent(tmp_path, sig):
     while time.time() < deadline and not all(_gone(k) for k in kids):
         time.sleep(0.2)
     assert all(_gone(k) for k in kids), [k for k in kids if not _gone(k)]
+
+
+def test_the_top_level_api_and_python_m(tmp_path):
+    import subprocess
+    import sys
+
+    import odomgraph
+    from odomgraph.sim.scenarios import paper
+    log = odomgraph.simulate(paper(30.0).with_(slips=()), 1)
+    a = odomgraph.estimate(log, "ekf", odomgraph.Schedule(20.0))
+    b = odomgraph.estimate(log, odomgraph.Method.ekf, odomgraph.Schedule(20.0))
+    assert isinstance(a, odomgraph.Estimate) and a.method == "ekf"
+    np.testing.assert_array_equal(a.mean, b.mean)
+    with pytest.raises(AttributeError, match="no attribute 'estimat'"):
+        odomgraph.estimat
+    r = subprocess.run([sys.executable, "-m", "odomgraph", "--version"], capture_output=True, text=True)
+    assert r.returncode == 0 and r.stdout.strip().endswith(odomgraph.__version__)
