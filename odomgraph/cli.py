@@ -535,8 +535,11 @@ def calibrate(
         "--tune/--no-tune", help="Choose the velocity process noise by predicting held-out fixes "
                                  "(default on; it is written to the [process] table).")] = True,
     force: Annotated[bool, typer.Option(
-        "--force", help="Write even when the checks fail (a mounting mistake, or parameters that predict "
-                        "held-out data worse than nominal).")] = False,
+        "--force", help="Write even when the checks fail (a mounting mistake, a GPS clock off against the "
+                        "wheels, or parameters that predict held-out data worse than nominal).")] = False,
+    time_offset: Annotated[bool, typer.Option(
+        "--time-offset", help="Estimate the GPS time offset against the wheels, apply it, and write it as "
+                              "[gps] time_offset.")] = False,
 ):
     """Estimate corrected ticks per metre and track width from a calibration log and write them
     (with their 1-sigma) as a robot.toml. Run it once after changing tyres."""
@@ -546,7 +549,7 @@ def calibrate(
     log = read_log(log_dir)
     with _Progress(f"calibrate ({method.value})") as bar:
         new, rep = calibrate_to_file(log, output, schedule, Method(method.value), progress=bar, tune=tune,
-                                     force=force)
+                                     force=force, **({"time_offset": True} if time_offset else {}))
     r = log.robot
     unobs = rep["unobservable"]
     for key, old, names in (("ticks_per_meter_left", r.ticks_per_meter_left, ("scale_left", "scale_common")),
@@ -558,6 +561,9 @@ def calibrate(
         typer.echo(f"{key:<22} {old:.6g} -> {v['value']:.6g} ± {v['sigma']:.2g}{tail}")
     if rep["held_out"]:
         typer.echo(rep["held_out"]["text"])
+    if rep.get("time_offsets"):
+        o = rep["time_offsets"]["gps"]
+        typer.echo(f"GPS time offset {o['value']:+.3f} ± {o['sigma']:.3f} s (written as [gps] time_offset)")
     pn = rep["process_noise"]
     if pn["held_out_rms_m"]:
         cv = ", ".join(f"x{r['factor']:g}: {100 * r['rms_m']:.2f} cm" for r in pn["held_out_rms_m"])

@@ -13,7 +13,7 @@ from odomgraph.analysis.mounting import mounting_warnings
 from odomgraph.cli import app
 from odomgraph.errors import CalibrationRejectedError, EstimatorDivergedError
 from odomgraph.estimators.schedule import Schedule
-from odomgraph.pipeline import Method, calibrate_to_file, estimate
+from odomgraph.pipeline import Method, calibrate_to_file, estimate, status_of
 from odomgraph.sim.faults import Faults, inject
 from odomgraph.sim.scenarios import paper, yard
 
@@ -54,6 +54,19 @@ def test_mounting_mistakes_are_named(which, seed):
     assert len(w) == 1 and "GPS frame looks mirrored" in w[0], w
     w = mounting_warnings(swapped.with_(gyro=None))
     assert len(w) == 1 and "swapped, or the GPS frame is mirrored" in w[0], w
+    backwards = log.with_(encoders=replace(e, ticks_left=-e.ticks_left))
+    w = mounting_warnings(backwards)
+    assert len(w) == 1 and "one encoder counts backwards" in w[0], w
+
+
+@pytest.mark.parametrize("which,seed", [("paper", 14), ("yard", 15)])
+def test_a_degrees_gyro_is_named_on_a_log_with_slip(which, seed):
+    """Slip looks like turning to the wheels and not to the gyro: the ratio
+    is taken from the fast turns (a least-squares slope read 37 for 57)."""
+    log = inject((paper if which == "paper" else yard)(60.0), Faults(), seed)   # with its slip events
+    assert mounting_warnings(log) == []
+    w = mounting_warnings(log.with_(gyro=replace(log.gyro, omega=np.degrees(log.gyro.omega))))
+    assert len(w) == 1 and "degrees per second" in w[0], w
 
 
 def test_mounting_mistakes_are_said_by_estimate():
@@ -78,10 +91,10 @@ def test_held_out_scores_prefer_the_true_parameters(which, seed):
     assert t0 == pytest.approx(log.gps.t[0] + TRAIN_SHARE * (log.gps.t[-1] - log.gps.t[0]))
     true = score_fixes(log, sc.scales, t0, log.t_end)
     wrong = score_fixes(log, (sc.scales[0] * 1.05, sc.scales[1] * 1.05, sc.scales[2] * 0.9), t0, log.t_end)
-    # the true parameters fit the held-out fixes to a few fix sigmas (20 s of
-    # tick noise and jitter), and
-    # 5-10 % wrong ones do not
-    assert true[0] < 4.0 * log.robot.gps_sigma and wrong[0] > 3.0 * true[0], (true, wrong)
+    # the true parameters fit the held-out fixes to about the fix sigma over
+    # 10 s windows (measured 1.4 and 2.7 sigma), and 5-10 % wrong ones do not
+    # (measured 1.9x and 6x the true parameters' score)
+    assert true[0] < 3.5 * log.robot.gps_sigma and wrong[0] > 1.5 * true[0], (true, wrong)
     assert true[1] == wrong[1] > 50
     g_true = score_gyro(log, sc.scales, t0, log.t_end)[0]
     g_wrong = score_gyro(log, (sc.scales[0], sc.scales[1], sc.scales[2] * 0.8), t0, log.t_end)[0]
@@ -153,3 +166,65 @@ def test_a_calibration_window_before_the_first_fix_is_said():
     # the same log with the window after the first fix says nothing of the kind
     est = estimate(late, Method.batch, Schedule(40.0))
     assert not [w for w in est.warnings if "calibration window" in w]
+
+
+
+# ------------------------------------------------------------------ clocks
+def _shift_gps(log, dt):
+    return log.with_(gps=replace(log.gps, t=log.gps.t + dt))
+
+
+def test_a_gps_clock_off_is_refused_and_with_time_offset_written(tmp_path):
+    """0.5 s early stamps gave scale factors 14-21 sigma off, written with
+    exit 0; now calibrate refuses, and --time-offset estimates and writes it."""
+    sc, log = _log("paper", 16, 60.0)
+    early = _shift_gps(log, -0.5)
+    out = tmp_path / "cal.toml"
+    with pytest.raises(CalibrationRejectedError, match=r"GPS time stamps look -0\.5\d s late.*--time-offset"):
+        calibrate_to_file(early, out, Schedule(20.0), Method.batch, tune=False)
+    assert not out.exists()
+    new, rep = calibrate_to_file(early, out, Schedule(20.0), Method.batch, tune=False, time_offset=True)
+    assert rep["problems"] == [] and new.gps_time_offset == pytest.approx(-0.5, abs=0.05)
+    import re
+    written = re.search(r"\ntime_offset = (\S+)\n", out.read_text())
+    assert written and float(written.group(1)) == pytest.approx(new.gps_time_offset, abs=1e-12)
+    for name, true in zip(("left", "right", "track"), sc.scales):
+        assert rep["scale"][name] == pytest.approx(true, rel=0.005)
+
+
+def test_a_full_second_late_is_seen_and_a_wrong_model_is_no_clock_jump():
+    _, log = _log("yard", 17, 90.0)
+    est = estimate(_shift_gps(log, 1.0), Method.batch, Schedule(20.0))
+    late = [w for w in est.warnings if "late" in w]
+    assert len(late) == 1 and "+1.0" in late[0], est.warnings
+    assert status_of(est)[0] == "degraded"
+    # a gyro at half scale bends every window differently: not a clock jump
+    half = log.with_(gyro=replace(log.gyro, omega=0.5 * log.gyro.omega))
+    est = estimate(half, Method.batch, Schedule(20.0))
+    assert not [w for w in est.warnings if "jump" in w], est.warnings
+    # a real jump of 0.5 s at 45 s is
+    g = log.gps
+    jumped = log.with_(gps=replace(g, t=np.where(g.t >= 45.0, g.t + 0.5, g.t)))
+    est = estimate(jumped, Method.batch, Schedule(20.0))
+    assert sum("seems to jump by +0.5" in w for w in est.warnings) == 1, est.warnings
+
+
+def test_a_mounting_mistake_makes_the_status_degraded():
+    _, log = _log("paper", 18, 60.0)
+    g = log.gps
+    est = estimate(log.with_(gps=replace(g, x=g.y, y=g.x)), Method.batch, Schedule(20.0))
+    status, why = status_of(est)
+    assert status == "degraded" and any("mirrored" in w for w in why)
+    assert status_of(estimate(log, Method.batch, Schedule(20.0)))[0] == "ok"
+
+
+@pytest.mark.parametrize("seed", [1, 9])
+def test_slip_in_the_held_out_part_does_not_refuse_a_good_calibration(tmp_path, seed):
+    """The yard log's slip at 50-58 s falls in the held-out part; it bent the
+    wheels' path for both parameter sets and decided the contest (refused
+    with nominal 2.37 m against 2.44 m); its spans are left out now."""
+    sc = yard(60.0)
+    log = inject(sc, Faults(), seed)
+    new, rep = calibrate_to_file(log, tmp_path / "cal.toml", Schedule(None), Method.batch, tune=False)
+    h = rep["held_out"]
+    assert rep["problems"] == [] and h["passed"] and h["calibrated"] < h["nominal"], h

@@ -7,7 +7,9 @@ sigma and no warning). The scores need no estimator, so neither parameter
 set is favoured by the fit's own start or state:
 
 - **fixes**: the wheels' own path (dead reckoning with the given scale
-  factors, GPS lever arm applied) over WINDOW-second windows, each moved by
+  factors, GPS lever arm applied) over WINDOW-second windows that hold no
+  slip (by the full-log estimate: slip bends the path whatever the
+  parameters), each moved by
   the rigid map that best fits that window's fixes (analysis.timing uses the
   same fit). Wrong scale factors bend and stretch the path, which no rigid
   map undoes; the score is the RMS fix residual [m].
@@ -24,7 +26,7 @@ import numpy as np
 #: Share of the log (by time) the parameters are fitted on; the rest is held out.
 TRAIN_SHARE = 0.7
 #: Window [s] of the fix score, and the fewest fixes a window is scored with.
-WINDOW = 20.0
+WINDOW = 10.0
 MIN_FIXES = 5
 #: Calibrated parameters pass when their held-out score is at most this
 #: multiple of the nominal one (noise makes equal parameters differ slightly).
@@ -55,7 +57,7 @@ class HeldOut:
 
     def text(self) -> str:
         what = "fix residual RMS" if self.kind == "fixes" else "gyro-vs-wheels yaw-rate RMS"
-        return (f"held-out {what} over t={self.t0:.0f}-{self.t1:.0f} s ({self.n} {self.kind} measurements): "
+        return (f"held-out {what} over t={self.t0:.0f}-{self.t1:.0f} s ({self.n} {'fixes' if self.kind == 'fixes' else 'gyro samples'}): "
                 f"nominal {self.nominal:.4g} {self.unit}, calibrated {self.calibrated:.4g} {self.unit}")
 
 
@@ -68,9 +70,11 @@ def split_time(log) -> float | None:
     return float(ref.t[0] + TRAIN_SHARE * (ref.t[-1] - ref.t[0]))
 
 
-def score_fixes(log, scales, t0: float, t1: float, window: float = WINDOW) -> tuple[float, int] | None:
+def score_fixes(log, scales, t0: float, t1: float, window: float = WINDOW, skip=()) -> tuple[float, int] | None:
     """(RMS rigid-window fix residual [m], fixes scored) over [t0, t1] in
-    windows of about ``window`` seconds, or None."""
+    windows of about ``window`` seconds, or None. Windows that overlap a
+    ``skip`` span (t_a, t_b) are left out: a slip bends the wheels' path
+    whatever the parameters, and would decide the contest by itself."""
     from odomgraph.analysis.timing import _misfit, _wheel_antenna
     from odomgraph.estimators.measurements import clean
     log = clean(log)[0]
@@ -86,6 +90,8 @@ def score_fixes(log, scales, t0: float, t1: float, window: float = WINDOW) -> tu
     edges = np.linspace(t0, t1, n_win + 1)
     sse, n = 0.0, 0
     for a, b in zip(edges[:-1], edges[1:]):
+        if any(sa < b and sb > a for sa, sb in skip):
+            continue
         sel = inside & (g.t >= a) & (g.t <= b)
         if sel.sum() < MIN_FIXES:
             continue
@@ -98,13 +104,16 @@ def score_fixes(log, scales, t0: float, t1: float, window: float = WINDOW) -> tu
     return (float(np.sqrt(sse / n)), n) if n else None
 
 
-def score_gyro(log, scales, t0: float, t1: float) -> tuple[float, int] | None:
-    """(RMS of gyro minus the wheels' yaw rate, a bias removed [rad/s], samples) over [t0, t1], or None."""
+def score_gyro(log, scales, t0: float, t1: float, skip=()) -> tuple[float, int] | None:
+    """(RMS of gyro minus the wheels' yaw rate, a bias removed [rad/s], samples)
+    over [t0, t1] outside the ``skip`` spans, or None."""
     rate = wheel_yaw_rate_at_gyro(log, scales)
     if rate is None:
         return None
     t, g, w = rate
     sel = (t >= t0) & (t <= t1)
+    for sa, sb in skip:
+        sel &= ~((t >= sa) & (t <= sb))
     if sel.sum() < MIN_FIXES:
         return None
     r = g[sel] - w[sel]
@@ -130,14 +139,34 @@ def wheel_yaw_rate_at_gyro(log, scales=(1.0, 1.0, 1.0)):
     return gt[keep], log.gyro.omega[keep], np.interp(gt[keep], tw, om)
 
 
-def held_out(log, nominal, calibrated, t0: float) -> HeldOut | None:
-    """Score both scale-factor triples on the log after ``t0``: on the fixes
-    when there are enough, else on the gyro; None when neither can be scored."""
+def slip_spans(est, n_sigma: float = 3.0, floor: float = 0.02, pad: float = 1.0) -> list[tuple[float, float]]:
+    """The spans [s] where ``est`` finds a wheel slipping (|slip| above
+    n_sigma of its sigma and ``floor`` m/s), each widened by ``pad`` seconds."""
+    from odomgraph import state as S
+    sl = np.abs(est.mean[:, S.SLIP])
+    sig = est.sigma[:, S.SLIP] if est.sigma is not None else np.zeros_like(sl)
+    on = np.any((sl > n_sigma * sig) & (sl > floor), axis=1)
+    spans, start = [], None
+    for t, o in zip(est.t, on):
+        if o and start is None:
+            start = t
+        elif not o and start is not None:
+            spans.append((start - pad, t + pad))
+            start = None
+    if start is not None:
+        spans.append((start - pad, est.t[-1] + pad))
+    return spans
+
+
+def held_out(log, nominal, calibrated, t0: float, skip=()) -> HeldOut | None:
+    """Score both scale-factor triples on the log after ``t0`` outside the
+    ``skip`` spans (slip_spans): on the fixes when there are enough, else on
+    the gyro; None when neither can be scored."""
     t1 = log.t_end
     for kind, score in (("fixes", score_fixes), ("gyro", score_gyro)):
-        a = score(log, nominal, t0, t1)
+        a = score(log, nominal, t0, t1, skip=skip)
         if a is None:
             continue
-        b = score(log, calibrated, t0, t1)
+        b = score(log, calibrated, t0, t1, skip=skip)
         return HeldOut(kind, t0, t1, a[0], b[0], a[1])
     return None

@@ -24,7 +24,7 @@ N_SIGMA = 5.0
 MIN_OFFSET = 0.05
 #: Window length [s], and the trial offsets [s].
 WINDOW = 10.0
-TRIALS = np.arange(-1.0, 1.0001, 0.1)
+TRIALS = np.arange(-2.0, 2.0001, 0.1)
 FINE = 0.02
 
 
@@ -126,6 +126,15 @@ def combine(parts: list[Offset]) -> Offset | None:
     return Offset(mean, float(np.sqrt(max(1.0, chi2) / w.sum())), parts[0].t0, parts[-1].t1)
 
 
+def _consistent(parts: list[Offset]) -> bool:
+    """The window offsets agree with their weighted mean within their sigmas
+    (reduced chi-square below 4) and within 0.1 s."""
+    d = np.array([p.delta for p in parts])
+    w = 1.0 / np.array([p.sigma for p in parts]) ** 2
+    mean = np.sum(w * d) / w.sum()
+    return bool(np.sum(w * (d - mean) ** 2) / max(1, len(d) - 1) < 4.0 and np.max(np.abs(d - mean)) < 0.1)
+
+
 def gps_offset(log, scales=(1.0, 1.0, 1.0)) -> Offset | None:
     """The log's GPS time offset against the wheels (see the module doc)."""
     return combine(window_offsets(log, scales))
@@ -141,9 +150,13 @@ def gps_offset_warnings(log, est) -> list[str]:
         out.append(f"GPS time stamps look {whole.delta:+.2f} s late (sigma {whole.sigma:.2f} s) against the wheels: "
                    "a receiver latency or clock offset biases the calibration; set [gps] time_offset in "
                    "robot.toml, or estimate it with --time-offset")
-    # A jump: the windows before and after a point disagree.
-    for k in range(1, len(parts)):
+    # A jump: the windows before and after a point disagree, and each side
+    # agrees with itself (windows that scatter everywhere say the wheels'
+    # path is off, from wrong parameters or a mounting mistake, not the clock).
+    for k in range(2, len(parts) - 1):
         a, b = combine(parts[:k]), combine(parts[k:])
+        if not (_consistent(parts[:k]) and _consistent(parts[k:])):
+            continue
         if abs(b.delta - a.delta) > max(N_SIGMA * np.hypot(a.sigma, b.sigma), MIN_OFFSET):
             out.append(f"the GPS clock seems to jump by {b.delta - a.delta:+.2f} s near t={parts[k].t0:.0f} s "
                        f"(offsets {a.delta:+.2f} s before, {b.delta:+.2f} s after)")

@@ -63,6 +63,10 @@ class Estimate:
     warnings: list[str] = field(default_factory=list)
     """One line each: what the user must know to trust the result (unobservable
     parameters, rejected measurements, a hit iteration cap, ...)."""
+    flags: list[str] = field(default_factory=list)
+    """Those warnings that say the result itself is suspect (a mounting
+    mistake, a GPS clock off, scale factors far outside their prior): the
+    status is "degraded" while any is there."""
     notes: list[str] = field(default_factory=list)
     online: "Estimate | None" = None
     """For incremental smoothers: the causal estimate as it stood at each time."""

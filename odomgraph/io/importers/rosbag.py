@@ -87,6 +87,8 @@ def _candidates(conns) -> dict[str, list]:
     """{role: [connection, ...]} of the topics each role could take."""
     out = {"wheels": [], "imu": [], "gps": []}
     for c in conns:
+        if c.msgcount == 0:     # listed in the bag, never published
+            continue
         if c.msgtype in WHEEL_TYPES:
             out["wheels"].append(c)
         elif c.msgtype == IMU_TYPE:
@@ -221,8 +223,8 @@ def import_rosbag(bag: Path | str, wheel_topic: str | None = None, left_joint: s
                         raise LogFormatError(bag, "no topic is clearly the wheels' own odometry among "
                                                   f"{sorted({c.topic for c in cands[role]})}: give --wheel-topic")
                     if given is None and len({c.topic for c in cands[role]}) > 1:
-                        warnings.append(f"several {role} topics ({sorted({c.topic for c in cands[role]})}): none "
-                                        f"imported; give --{'imu' if role == 'imu' else 'gps'}-topic")
+                        raise LogFormatError(bag, f"several {role} topics ({sorted({c.topic for c in cands[role]})}): "
+                                                  f"give --{role}-topic (or --{role}-topic '' for none)")
                     if given:
                         notes.append(f"{role}: picked {given}")
                 chosen[role] = given or None
@@ -276,7 +278,8 @@ def import_rosbag(bag: Path | str, wheel_topic: str | None = None, left_joint: s
         raise LogFormatError(bag, f"cannot read the bag: {exc}") from None
     ws = _wheel_speeds(bag, chosen["wheels"], kind, wheels, wheel_radius, track_width)
     if kind != "joints":
-        notes.append(f"wheels from the {kind} twist of {chosen['wheels']} through the nominal track "
+        notes.append(f"wheels from the {'odometry twist' if kind == 'odometry' else 'TwistStamped'} of "
+                     f"{chosen['wheels']} through the nominal track "
                      f"({track_width:g} m): this assumes that odometry came from the wheels alone")
     gps, origin, gps_sigma = None, None, 0.05
     if no_fix:
