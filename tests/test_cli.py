@@ -120,13 +120,19 @@ def test_diverged_filter_is_an_error_not_nan(log_copy, tmp_path):
 
 
 def test_help_texts():
+    """Every command's help, with its units: rich markup used to eat "[m]",
+    "[s]", "[Hz]" and "[initial]" (issue 14)."""
     res = run("--help")
     assert res.exit_code == 0
-    for cmd in ("simulate", "estimate", "demo"):
+    commands = ("simulate", "estimate", "demo", "compare", "calibrate", "montecarlo", "import")
+    for cmd in commands:
         assert cmd in res.output
-        sub = run(cmd, "--help")
-        assert sub.exit_code == 0 and "Usage" in sub.output
-    assert "--calibrate-until" in run("estimate", "--help").output
+    helps = {cmd: " ".join(run(cmd, "--help").output.split()) for cmd in commands}
+    assert all(h.startswith("Usage: ") for h in helps.values())
+    assert "--calibrate-until" in helps["estimate"] and "--time-offset" in helps["estimate"]
+    assert "Length of the log [s]" in helps["simulate"] and "[Hz]" in helps["simulate"]
+    assert "nominal track width [m]" in helps["import"] and "--imu-axis" in helps["import"]
+    assert "--force" in helps["calibrate"] and "[gps] time_offset" in helps["calibrate"]
 
 
 @pytest.mark.parametrize("method", ["batch", "isam2", "fixed-lag"])

@@ -107,6 +107,10 @@ def test_comments_and_extra_columns_are_allowed(log_copy):
     p.write_text("# gyro from the IMU\n" + "\n".join(body[:5]) + "\n# a comment mid-file\n" + "\n".join(body[5:]) + "\n")
     log = read_log(log_copy)
     assert log.gyro.t.size == len(lines) - 1
+    # the values are the file's, column by column, the extra column ignored
+    ref = np.array([[float(v) for v in ln.split(",")] for ln in lines[1:]])
+    np.testing.assert_array_equal(log.gyro.t, ref[:, 0])
+    np.testing.assert_array_equal(log.gyro.omega, ref[:, 1])
 
 
 def test_latlon_gps_is_projected(tmp_path, paper_log):

@@ -82,3 +82,18 @@ def test_optional_sensors_and_beacons():
     assert log.gps is None and log.gyro is None
     assert set(np.unique(log.ranges.beacon)) == {0, 1, 2}
     assert log.velocity.t.size == pytest.approx(150, abs=2)
+    # the ranges are the true ranges (lever arm applied) plus the configured noise
+    r, tr, rb = log.ranges, log.truth, sc.robot
+    x, y, th = (tr.at(k, r.t) for k in ("x", "y", "theta"))
+    lx, ly = rb.range_lever_arm
+    ax, ay = x + np.cos(th) * lx - np.sin(th) * ly, y + np.sin(th) * lx + np.cos(th) * ly
+    b = np.array([[bc.x, bc.y] for bc in rb.beacons])[r.beacon]
+    res = r.range - np.hypot(ax - b[:, 0], ay - b[:, 1])
+    assert abs(res.mean()) < 4 * rb.range_sigma / np.sqrt(res.size)
+    assert res.std() == pytest.approx(rb.range_sigma, rel=0.15)
+    # the velocity sensor reads the true body velocity plus its noise
+    ev = log.velocity.v - tr.at("v", log.velocity.t)
+    ew = log.velocity.omega - tr.at("omega", log.velocity.t)
+    sv, sw = rb.velocity_sigma
+    assert abs(ev.mean()) < 4 * sv / np.sqrt(ev.size) and ev.std() == pytest.approx(sv, rel=0.2)
+    assert abs(ew.mean()) < 4 * sw / np.sqrt(ew.size) and ew.std() == pytest.approx(sw, rel=0.2)
