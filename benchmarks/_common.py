@@ -11,15 +11,25 @@ from pathlib import Path
 RESULTS = Path(__file__).resolve().parent / "results"
 
 
+def _git(*args) -> str:
+    try:
+        return subprocess.run(["git", *args], capture_output=True, text=True, cwd=RESULTS.parent).stdout.strip()
+    except OSError:
+        return ""
+
+
+#: The commit when the benchmark started (the code it imports is read then),
+#: and whether the project's sources differed from it.
+START = {"commit": _git("rev-parse", "--short", "HEAD"),
+         "dirty": bool(_git("status", "--porcelain", "--", "odomgraph", "factors")),
+         "time": datetime.now(timezone.utc).timestamp()}
+
+
 def machine() -> dict:
     import numpy
-    try:
-        commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True,
-                                cwd=RESULTS.parent).stdout.strip()
-    except OSError:
-        commit = ""
     return {"date": datetime.now(timezone.utc).isoformat(timespec="seconds"), "cpus": os.cpu_count(),
-            "python": platform.python_version(), "numpy": numpy.__version__, "commit": commit}
+            "python": platform.python_version(), "numpy": numpy.__version__, "commit": START["commit"],
+            "sources_dirty": START["dirty"]}
 
 
 def sources() -> dict[str, str]:
@@ -40,7 +50,9 @@ def sources() -> dict[str, str]:
         except ValueError:
             continue
         if rel.parts[0] in ("odomgraph", "factors") and p.suffix == ".py":
-            out[str(rel)] = hashlib.sha256(p.read_bytes()).hexdigest()[:16]
+            # A file edited while the benchmark ran is not what it ran: no hash.
+            changed = p.stat().st_mtime > START["time"]
+            out[str(rel)] = "changed during the run" if changed else hashlib.sha256(p.read_bytes()).hexdigest()[:16]
     return dict(sorted(out.items()))
 
 
