@@ -86,12 +86,8 @@ def score_fixes(log, scales, t0: float, t1: float, window: float = WINDOW, skip=
     inside = (g.t >= max(t0, t_dr[0])) & (g.t <= min(t1, t_dr[-1]))
     if inside.sum() < MIN_FIXES:
         return None
-    n_win = max(1, int(round((t1 - t0) / window)))
-    edges = np.linspace(t0, t1, n_win + 1)
     sse, n = 0.0, 0
-    for a, b in zip(edges[:-1], edges[1:]):
-        if any(sa < b and sb > a for sa, sb in skip):
-            continue
+    for a, b in _windows(t0, t1, window, skip):
         sel = inside & (g.t >= a) & (g.t <= b)
         if sel.sum() < MIN_FIXES:
             continue
@@ -102,6 +98,29 @@ def score_fixes(log, scales, t0: float, t1: float, window: float = WINDOW, skip=
         sse += _misfit(d, p, np.ones(len(tf)))
         n += int(sel.sum())
     return (float(np.sqrt(sse / n)), n) if n else None
+
+
+def _windows(t0: float, t1: float, window: float, skip=()) -> list[tuple[float, float]]:
+    """Windows of about ``window`` seconds covering [t0, t1] outside the
+    ``skip`` spans: each slip-free stretch of at least half a window is cut
+    into equal windows."""
+    free, a = [], t0
+    for sa, sb in sorted(skip):
+        if sb <= a or sa >= t1:
+            continue
+        if sa > a:
+            free.append((a, sa))
+        a = max(a, sb)
+    if a < t1:
+        free.append((a, t1))
+    out = []
+    for a, b in free:
+        if b - a < 0.5 * window:
+            continue
+        n = max(1, int(round((b - a) / window)))
+        edges = np.linspace(a, b, n + 1)
+        out += list(zip(edges[:-1], edges[1:]))
+    return out
 
 
 def score_gyro(log, scales, t0: float, t1: float, skip=()) -> tuple[float, int] | None:
@@ -164,9 +183,15 @@ def held_out(log, nominal, calibrated, t0: float, skip=()) -> HeldOut | None:
     the gyro; None when neither can be scored."""
     t1 = log.t_end
     for kind, score in (("fixes", score_fixes), ("gyro", score_gyro)):
-        a = score(log, nominal, t0, t1, skip=skip)
+        use = skip
+        a = score(log, nominal, t0, t1, skip=use)
+        if a is None and skip:
+            # Slip over the whole held-out part is the fit failing (a late GPS
+            # makes it see slip everywhere), not a reason to skip the fixes.
+            use = ()
+            a = score(log, nominal, t0, t1, skip=use)
         if a is None:
             continue
-        b = score(log, calibrated, t0, t1, skip=skip)
+        b = score(log, calibrated, t0, t1, skip=use)
         return HeldOut(kind, t0, t1, a[0], b[0], a[1])
     return None

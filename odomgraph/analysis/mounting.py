@@ -26,6 +26,8 @@ MIN_SAMPLES = 30
 MIN_CORRELATION = 0.3
 #: Below minus this correlation, the fixes turn the other way from the wheels.
 FIX_CORRELATION = 0.5
+#: The fixes' speed is compared with the wheels' at lags up to this [s].
+MAX_LAG = 4.0
 
 
 def mounting_warnings(log) -> list[str]:
@@ -45,12 +47,25 @@ def mounting_warnings(log) -> list[str]:
             # distribution is the robot's real turns.
             slope = float(np.percentile(np.abs(g), 95) / np.percentile(np.abs(w), 95))
     out = []
-    speed_c = fix_speed_correlation(log)
-    if speed_c is not None and speed_c < MIN_CORRELATION:
-        out.append(f"the wheels' speed does not follow the fixes' (correlation {speed_c:.2f}): one encoder counts "
-                   "backwards, or the encoders are not the wheels the log says")
+    speed = fix_speed_correlation(log)
+    if speed is not None and speed[0] < MIN_CORRELATION:
+        c0, lag, c_lag = speed
+        # A clock offset only when the shifted speeds agree well, at a lag
+        # inside the range tried (a periodic path correlates somewhere at the
+        # edge: one encoder backwards gave 0.63 at 4 s).
+        if c_lag > 0.8 and 0 < abs(lag) < MAX_LAG:
+            out.append(f"the fixes' speed follows the wheels' {lag:+.0f} s later (correlation {c_lag:.2f}, "
+                       f"{c0:.2f} without the shift): the GPS clock is off by about that much; estimate it with "
+                       "--time-offset")
+        else:
+            out.append(f"the wheels' speed does not follow the fixes' (correlation {c0:.2f}): one encoder counts "
+                       "backwards, or the encoders are not the wheels the log says")
         return out   # the turn checks below would only repeat it under other names
     fixes_against = fix_c is not None and fix_c < -FIX_CORRELATION
+    # With the gyro against the wheels too, a weaker no from the fixes is enough
+    # (their course is noisy at a few Hz): two witnesses against one.
+    if gyro_c is not None and gyro_c < -MIN_CORRELATION and fix_c is not None and fix_c < -0.2:
+        fixes_against = True
     if fixes_against:
         if gyro_c is not None and gyro_c < -MIN_CORRELATION:
             out.append(f"the fixes and the gyro both turn against the wheels (correlations {fix_c:.2f}, {gyro_c:.2f}): "
@@ -64,9 +79,9 @@ def mounting_warnings(log) -> list[str]:
     if gyro_c is None:
         return out
     if gyro_c < -MIN_CORRELATION and not fixes_against:
+        sure = fix_c is not None and fix_c > 0.2      # the fixes side with the wheels
         out.append(f"the gyro turns against the wheels (correlation {gyro_c:.2f}): the gyro is mounted upside down "
-                   "or its sign is flipped" + ("" if fix_c is not None else
-                                               ", or the left and right wheels are swapped"))
+                   "or its sign is flipped" + ("" if sure else ", or the left and right wheels are swapped"))
     elif abs(gyro_c) < MIN_CORRELATION:
         out.append(f"the gyro does not follow the wheels' turn rate (correlation {gyro_c:.2f}): its yaw is on another "
                    "axis than the log says, or it is not in rad/s")
@@ -92,28 +107,42 @@ def _fix_grid(log, step: float):
     return grid, np.interp(grid, g.t, g.x), np.interp(grid, g.t, g.y), t_dr, dr, sig
 
 
-def fix_speed_correlation(log, step: float = 2.0) -> float | None:
-    """Correlation between the fixes' speed and the wheels' speed (nominal)
-    over ``step``-second steps; None when the robot's speed varies too little
-    (against the fix noise) to tell."""
+def fix_speed_correlation(log, step: float = 2.0, max_lag: float | None = None):
+    """(correlation between the fixes' speed and the wheels' speed (nominal)
+    over ``step``-second steps, the lag [s] of the fixes that correlates
+    best within +-max_lag, that correlation); None when the robot's speed
+    varies too little (against the fix noise) to tell."""
     grid_data = _fix_grid(log, step)
     if grid_data is None:
         return None
     grid, x, y, t_dr, dr, sig = grid_data
     fix_speed = np.hypot(np.diff(x), np.diff(y)) / step
-    px, py = np.interp(grid, t_dr, dr[:, 0]), np.interp(grid, t_dr, dr[:, 1])
-    wheel_speed = np.hypot(np.diff(px), np.diff(py)) / step
-    if fix_speed.size < 10 or np.std(fix_speed) < 4.0 * sig / step or np.std(wheel_speed) == 0:
+    max_lag = MAX_LAG if max_lag is None else max_lag
+
+    def wheel_speed(lag):
+        px, py = np.interp(grid - lag, t_dr, dr[:, 0]), np.interp(grid - lag, t_dr, dr[:, 1])
+        return np.hypot(np.diff(px), np.diff(py)) / step
+    w0 = wheel_speed(0.0)
+    if fix_speed.size < 10 or np.std(fix_speed) < 4.0 * sig / step or np.std(w0) == 0:
         return None
-    return float(np.corrcoef(fix_speed, wheel_speed)[0, 1])
+    corr = {lag: float(np.corrcoef(fix_speed, wheel_speed(lag))[0, 1])
+            for lag in np.arange(-max_lag, max_lag + 1e-9, 0.5) if np.std(wheel_speed(lag)) > 0}
+    best = max(corr, key=corr.get)
+    return corr.get(0.0, float(np.corrcoef(fix_speed, w0)[0, 1])), float(best), corr[best]
 
 
-def fix_turn_correlation(log, step: float = 1.0) -> float | None:
+def fix_turn_correlation(log, step: float | None = None) -> float | None:
     """Correlation between how the fixes' course turns and how the wheels'
     heading turns, over ``step``-second steps [-1..1]; None when the fixes are
     too few or the robot turns too little to tell. Independent of the scale
     factors (they change how much, not which way), and of driving backwards
-    (the course is then off by pi, its changes are not)."""
+    (the course is then off by pi, its changes are not). ``step`` defaults
+    to four fix intervals, at least 1 s: a course from two noisy fixes a
+    fraction of a second apart is mostly noise."""
+    if step is None:
+        if log.gps is None or len(log.gps.t) < 2:
+            return None
+        step = max(1.0, 4.0 * float(np.median(np.diff(log.gps.t))))
     grid_data = _fix_grid(log, step)
     if grid_data is None:
         return None
