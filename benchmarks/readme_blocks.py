@@ -104,21 +104,31 @@ def faults(results: Path) -> str:
             f"{d['wall_s'] / 60:.0f} min:\n\n" + "\n".join(out) + f"\n\n{_source('faults', d)}")
 
 
+HONESTY_HEAD = ["| log | estimator | status | RMS m | ±3σ coverage x / y | noise scale applied | warnings |",
+                "|---|---|---|---|---|---|---|"]
+
+
+def honesty_row(log: str, method: str, r: dict, warnings_shown: int = 0) -> str:
+    """One row of the real-log honesty table (benchmarks.real_data writes the
+    same rows with the first ``warnings_shown`` warnings spelled out)."""
+    if not r["finished"]:
+        why = f": {r['error'][:90]}" if warnings_shown else ""
+        return f"| {log} | {method} | stopped{why} | | | | |"
+    cov = r["coverage_3sigma"]
+    said = f"{len(r['warnings'])}" + (": " + "; ".join(w[:60] for w in r["warnings"][:warnings_shown])
+                                      if warnings_shown else "")
+    return (f"| {log} | {method} | {r['status']} | "
+            + (f"{r['rms_position_m']:.3f}" if r["rms_position_m"] is not None else "–") + " | "
+            + (f"{cov['x']:.2f} / {cov['y']:.2f}" if cov else "–") + " | "
+            + (", ".join(f"{k} ×{v:.2g}" for k, v in r["noise_scales"].items()) or "–") + f" | {said} |")
+
+
 def real_data_honesty(results: Path) -> str:
     d = _load("real_data", results)
-    out = ["| log | estimator | status | RMS m | ±3σ coverage x / y | noise scale applied | warnings |",
-           "|---|---|---|---|---|---|---|"]
+    out = list(HONESTY_HEAD)
     for key, r in d["honesty"].items():
         log, method = key.rsplit(" / ", 1)
-        if not r["finished"]:
-            out.append(f"| {log} | {method} | stopped | | | | |")
-            continue
-        cov = r["coverage_3sigma"]
-        out.append(f"| {log} | {method} | {r['status']} | "
-                   + (f"{r['rms_position_m']:.3f}" if r["rms_position_m"] is not None else "–") + " | "
-                   + (f"{cov['x']:.2f} / {cov['y']:.2f}" if cov else "–") + " | "
-                   + (", ".join(f"{k} ×{v:.2g}" for k, v in r["noise_scales"].items()) or "–") + " | "
-                   + f"{len(r['warnings'])} |")
+        out.append(honesty_row(log, method, r))
     tr = ["| calibrated on | held-out check | tested on | share of the oracle's improvement |", "|---|---|---|---|"]
     for key, r in d["honesty_transfer"].items():
         if "error" in r:

@@ -16,6 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from benchmarks._common import save
+from benchmarks.readme_blocks import HONESTY_HEAD, honesty_row
 from odomgraph.analysis.deadreckoning import best_fit_scales, dead_reckon, final_position_error
 from odomgraph.analysis.metrics import truth_errors
 from odomgraph.errors import EstimatorDivergedError
@@ -179,8 +180,7 @@ def honesty(out, md):
     md += ["", "### Honesty: every real log and estimator, no [initial] pose", "",
            "Default options (schedule: 20 s window; `none` for the EKF-free Jackal batch). Coverage is the "
            "share of positions inside ±3σ of the truth (x / y).", "",
-           "| log | estimator | status | RMS m | coverage x / y | noise scale applied | warnings |",
-           "|---|---|---|---|---|---|---|"]
+           *HONESTY_HEAD]
     out["honesty"] = {}
     for name, lg in logs.items():
         for m in Method:
@@ -190,15 +190,7 @@ def honesty(out, md):
             except Exception as exc:   # a benchmark records what happened
                 r = {"finished": False, "error": str(exc)}
             out["honesty"][f"{name} / {m.value}"] = r
-            if not r["finished"]:
-                md.append(f"| {name} | {m.value} | stopped: {r['error'][:90]} | | | | |")
-                continue
-            cov = r["coverage_3sigma"]
-            md.append(f"| {name} | {m.value} | {r['status']} | "
-                      + (f"{r['rms_position_m']:.3f}" if r["rms_position_m"] is not None else "–") + " | "
-                      + (f"{cov['x']:.2f} / {cov['y']:.2f}" if cov else "–") + " | "
-                      + (", ".join(f"{k} ×{v:.2g}" for k, v in r["noise_scales"].items()) or "–") + " | "
-                      + f"{len(r['warnings'])}: " + "; ".join(w[:60] for w in r["warnings"][:2]) + " |")
+            md.append(honesty_row(name, m.value, r, warnings_shown=2))
     if JACKAL.exists():
         # The wheels + IMU bag: what calibrate writes, and what it says.
         jk = logs["jackal bag (no truth, no absolute sensor)"]

@@ -114,6 +114,17 @@ def gps_deviation(est: Estimate, log: Log) -> tuple[np.ndarray, np.ndarray] | No
     Returns (t (M,) [s], deviation (M,) [m]) for fixes inside the estimate's span,
     or None when the log has no GPS.
     """
+    res = gps_residuals(est, log)
+    if res is None:
+        return None
+    t, r, _ = res
+    return t, np.hypot(r[:, 0], r[:, 1])
+
+
+def gps_residuals(est: Estimate, log: Log) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+    """Measured minus predicted antenna position (pose + lever arm, paper eq.
+    8) for the fixes inside the estimate's span: (t (M,) [s], residual (M, 2)
+    east/north [m], each fix's sigma (M,) [m]); None when the log has no GPS."""
     from factors.gps import antenna_position
     g = log.gps
     if g is None or len(g.t) == 0:
@@ -122,7 +133,8 @@ def gps_deviation(est: Estimate, log: Log) -> tuple[np.ndarray, np.ndarray] | No
     t = g.t[inside]
     p = pose_at(est, t)
     h, _ = antenna_position(p[:, 0], p[:, 1], p[:, 2], log.robot.gps_lever_arm)
-    return t, np.hypot(h[:, 0] - g.x[inside], h[:, 1] - g.y[inside])
+    sig = g.sigma[inside] if g.sigma is not None else np.full(t.size, log.robot.gps_sigma)
+    return t, np.stack([g.x[inside] - h[:, 0], g.y[inside] - h[:, 1]], -1), sig
 
 
 def range_residuals(est: Estimate, log: Log) -> tuple[np.ndarray, np.ndarray] | None:

@@ -42,33 +42,14 @@ def noise_scales(est, log) -> dict[str, float]:
 
 
 def _whitened_residuals(est, log, sensor: str) -> np.ndarray | None:
-    """Post-fit residuals of one sensor against the estimate, divided by their sigma (per axis)."""
-    from factors.gps import antenna_position
-    from factors.ranging import beacon_range
-    from odomgraph.analysis.metrics import pose_at
-    if sensor == "gps" and log.gps is not None and len(log.gps.t):
-        g = log.gps
-        inside = (g.t >= est.t[0]) & (g.t <= est.t[-1])
-        if not inside.any():
-            return None
-        p = pose_at(est, g.t[inside])
-        h, _ = antenna_position(p[:, 0], p[:, 1], p[:, 2], log.robot.gps_lever_arm)
-        sig = (g.sigma[inside] if g.sigma is not None else np.full(int(inside.sum()), log.robot.gps_sigma))
-        return (np.stack([g.x[inside], g.y[inside]], -1) - h).ravel() / np.repeat(sig, 2)
-    if sensor == "ranges" and log.ranges is not None and len(log.ranges.t) and log.robot.beacons:
-        r = log.ranges
-        inside = (r.t >= est.t[0]) & (r.t <= est.t[-1])
-        if not inside.any():
-            return None
-        p = pose_at(est, r.t[inside])
-        bxy = np.asarray([[b.x, b.y] for b in log.robot.beacons])[r.beacon[inside]]
-        bias = 0.0
-        if est.range_bias:
-            per = np.array([est.range_bias.get(b.id, {"value": 0.0})["value"] for b in log.robot.beacons])
-            bias = per[r.beacon[inside]]
-        h, _ = beacon_range(p[:, 0], p[:, 1], p[:, 2], bxy, log.robot.range_lever_arm, bias)
-        return (r.range[inside] - h[:, 0]) / log.robot.range_sigma
-    return None
+    """Post-fit residuals of one sensor against the estimate, divided by their
+    sigma (per axis), from the residuals the metrics use (analysis.metrics)."""
+    from odomgraph.analysis.metrics import gps_residuals, range_residuals
+    if sensor == "gps":
+        res = gps_residuals(est, log)
+        return None if res is None or not res[0].size else (res[1] / res[2][:, None]).ravel()
+    res = range_residuals(est, log)
+    return None if res is None or not res[0].size else res[1] / log.robot.range_sigma
 
 
 def widened(log, scales: dict[str, float]):
