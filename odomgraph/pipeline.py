@@ -42,8 +42,22 @@ def estimate(log: Log, method: Method = Method.ekf, schedule: Schedule = Schedul
     fit_noise = bool(options.pop("fit_noise", True))
     _check_option_names(options)
     options = {k: v for k, v in options.items() if v is not None}
+    from odomgraph.io.log import rebased
+    log = rebased(log)  # a real clock's stamps, counted from a whole second (Log.t_origin)
     if time_offset:
-        return _with_time_offset(log, method, schedule, progress, {**options, "fit_noise": fit_noise})
+        est = _with_time_offset(log, method, schedule, progress, {**options, "fit_noise": fit_noise})
+    else:
+        est = _estimate_checked(log, method, schedule, progress, options, fit_noise)
+    for e in (est, est.online):
+        if e is not None:
+            e.t_origin = log.t_origin
+    return est
+
+
+def _estimate_checked(log: Log, method: Method, schedule: Schedule, progress, options: dict,
+                      fit_noise: bool) -> Estimate:
+    """One estimator run with the checks of ``estimate``: physical scale
+    factors, fitted noise scales, prior conflicts, mounting and GPS timing."""
     from odomgraph.analysis.mounting import mounting_warnings
     from odomgraph.errors import EstimatorDivergedError
     try:
@@ -312,10 +326,14 @@ def status_of(est: Estimate) -> tuple[str, list[str]]:
 def summary(est: Estimate, log: Log, schedule: Schedule) -> dict:
     """summary.json content (LOG_FORMAT.md plus consistency and throughput)."""
     from odomgraph.estimators.observability import combinations_of
+    from odomgraph.io.log import rebased
+    log = rebased(log)  # on est's clock (Log.t_origin)
     out = {
         "method": est.method,
         "log": str(log.path) if log.path else None,
         "n_steps": int(len(est.t)),
+        # every time below counts seconds from this whole second of the log's clock
+        "t_origin": est.t_origin,
         "wall_time_s": est.wall_time_s,
         "n_updates": est.n_updates,
         "updates_per_second": est.n_updates / est.wall_time_s if est.wall_time_s > 0 else None,
@@ -451,6 +469,8 @@ def calibrate(log: Log, schedule: Schedule = Schedule(calibrate_until=None), met
     the parameters with their 1-sigma and, when the log has truth, how dead
     reckoning on this log changes with the new parameters.
     """
+    from odomgraph.io.log import rebased
+    log = rebased(log)  # Log.t_origin
     from odomgraph.analysis.deadreckoning import dead_reckon
     table = []
     if tune:
@@ -620,6 +640,8 @@ def compare_to_dir(log: Log, out: Path, schedule: Schedule, progress_for=None, t
     and one estimate directory per estimator (isam2/ holds online.csv).
     ``include_log`` also writes the log itself to out/log (the demo does).
     Returns the Comparison."""
+    from odomgraph.io.log import rebased
+    log = rebased(log)  # Log.t_origin
     from odomgraph.analysis.compare import run_comparison
     from odomgraph.analysis.plots import overview_figure
     from odomgraph.analysis.report import write_report

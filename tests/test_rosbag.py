@@ -28,22 +28,38 @@ def _write_bag(path, log, wheels="joints", imu_axis="z", tf_lever=None, no_fix_e
     ``wheels="twist"`` writes geometry_msgs/TwistStamped; ``imu_tf`` writes
     the IMU's mounting (yaw axis ``imu_axis``) into /tf_static; ``storage``:
     sqlite3 or mcap."""
+    from rosbags.rosbag1 import Writer as Writer1
     from rosbags.rosbag2 import StoragePlugin
     from rosbags.rosbag2 import Writer
     from rosbags.typesys import Stores, get_typestore
-    ts = get_typestore(Stores.ROS2_HUMBLE)
+    ros1 = storage == "ros1"
+    ts = get_typestore(Stores.ROS1_NOETIC if ros1 else Stores.ROS2_HUMBLE)
+    if ros1:  # rosbags' Noetic store lacks tf2_msgs; a ROS 1 bag carries its definition
+        from rosbags.typesys import get_types_from_msg
+        ts.register(get_types_from_msg("geometry_msgs/TransformStamped[] transforms", "tf2_msgs/msg/TFMessage"))
     T = ts.types
     Time, Header = T["builtin_interfaces/msg/Time"], T["std_msgs/msg/Header"]
+    base = int(t0)
+    assert base == t0, "t0 is a whole second, so that stamps are exact"
 
     def header(t):
-        return Header(stamp=Time(sec=int(t), nanosec=int(round((t - int(t)) * 1e9))), frame_id="base_link")
+        """Stamp t0 + t, written from integers: a float of 1.7e9 + t is 2e-7 s off."""
+        sec = int(np.floor(t))
+        stamp = Time(sec=base + sec, nanosec=int(round((t - sec) * 1e9)))
+        return Header(seq=0, stamp=stamp, frame_id="base_link") if ros1 else Header(stamp=stamp, frame_id="base_link")
+
+    def at(t):  # the bag's receive time [ns], equal to the header stamp
+        return base * 1_000_000_000 + int(round(t * 1e9))
+
+    def ser(msg, typ):
+        return ts.serialize_ros1(msg, typ) if ros1 else ts.serialize_cdr(msg, typ)
 
     a, e2 = 6_378_137.0, 6.69437999014e-3
     s2 = np.sin(np.radians(LAT0)) ** 2
     M, N = a * (1 - e2) / (1 - e2 * s2) ** 1.5, a / np.sqrt(1 - e2 * s2)
     V3, Q = T["geometry_msgs/msg/Vector3"], T["geometry_msgs/msg/Quaternion"]
     plugin = StoragePlugin.MCAP if storage == "mcap" else StoragePlugin.SQLITE3
-    with Writer(path, version=8, storage_plugin=plugin) as w:
+    with (Writer1(path) if ros1 else Writer(path, version=8, storage_plugin=plugin)) as w:
         cg = w.add_connection("/fix", "sensor_msgs/msg/NavSatFix", typestore=ts)
         ci = w.add_connection("/imu", "sensor_msgs/msg/Imu", typestore=ts)
         e, r = log.encoders, log.robot
@@ -52,20 +68,20 @@ def _write_bag(path, log, wheels="joints", imu_axis="z", tf_lever=None, no_fix_e
             angle_l = np.cumsum(e.ticks_left) / r.ticks_per_meter_left / R_WHEEL
             angle_r = np.cumsum(e.ticks_right) / r.ticks_per_meter_right / R_WHEEL
             for t, al, ar in zip(e.t, angle_l, angle_r):
-                msg = T["sensor_msgs/msg/JointState"](header=header(t + t0),
+                msg = T["sensor_msgs/msg/JointState"](header=header(t),
                                                       name=["caster_joint", "left_wheel_joint", "right_wheel_joint"],
                                                       position=np.array([0.3, al, ar]), velocity=np.array([], float),
                                                       effort=np.array([], float))
-                w.write(cj, int((t + t0) * 1e9), ts.serialize_cdr(msg, "sensor_msgs/msg/JointState"))
+                w.write(cj, at(t), ser(msg, "sensor_msgs/msg/JointState"))
         elif wheels == "twist":
             ct = w.add_connection("/cmd_vel_measured", "geometry_msgs/msg/TwistStamped", typestore=ts)
             dt = np.diff(e.t)
             vl, vr = e.ticks_left[1:] / (r.ticks_per_meter_left * dt), e.ticks_right[1:] / (r.ticks_per_meter_right * dt)
             for t, vi, wi in zip(e.t[1:], 0.5 * (vl + vr), (vr - vl) / r.track_width):
                 msg = T["geometry_msgs/msg/TwistStamped"](
-                    header=header(t + t0), twist=T["geometry_msgs/msg/Twist"](linear=V3(x=vi, y=0.0, z=0.0),
+                    header=header(t), twist=T["geometry_msgs/msg/Twist"](linear=V3(x=vi, y=0.0, z=0.0),
                                                                              angular=V3(x=0.0, y=0.0, z=wi)))
-                w.write(ct, int((t + t0) * 1e9), ts.serialize_cdr(msg, "geometry_msgs/msg/TwistStamped"))
+                w.write(ct, at(t), ser(msg, "geometry_msgs/msg/TwistStamped"))
         else:
             topics = ["/diff_drive_controller/odom"] + (["/odometry/filtered"] if extra_odom else [])
             conns = [w.add_connection(tp, "nav_msgs/msg/Odometry", typestore=ts) for tp in topics]
@@ -75,7 +91,7 @@ def _write_bag(path, log, wheels="joints", imu_axis="z", tf_lever=None, no_fix_e
             P, Tw = T["geometry_msgs/msg/PoseWithCovariance"], T["geometry_msgs/msg/TwistWithCovariance"]
             for t, vi, wi in zip(e.t[1:], v, om):
                 msg = T["nav_msgs/msg/Odometry"](
-                    header=header(t + t0), child_frame_id="base_link",
+                    header=header(t), child_frame_id="base_link",
                     pose=P(pose=T["geometry_msgs/msg/Pose"](position=T["geometry_msgs/msg/Point"](x=0.0, y=0.0, z=0.0),
                                                            orientation=Q(x=0.0, y=0.0, z=0.0, w=1.0)),
                            covariance=np.zeros(36)),
@@ -83,11 +99,11 @@ def _write_bag(path, log, wheels="joints", imu_axis="z", tf_lever=None, no_fix_e
                                                                angular=V3(x=0.0, y=0.0, z=wi)),
                              covariance=np.zeros(36)))
                 for c in conns:
-                    w.write(c, int((t + t0) * 1e9), ts.serialize_cdr(msg, "nav_msgs/msg/Odometry"))
+                    w.write(c, at(t), ser(msg, "nav_msgs/msg/Odometry"))
         trs = []
         if tf_lever is not None:
             trs.append(T["geometry_msgs/msg/TransformStamped"](
-                header=header(t0), child_frame_id="gps",
+                header=header(0.0), child_frame_id="gps",
                 transform=T["geometry_msgs/msg/Transform"](translation=V3(x=tf_lever[0], y=tf_lever[1], z=0.5),
                                                            rotation=Q(x=0.0, y=0.0, z=0.0, w=1.0))))
         if imu_tf:
@@ -96,36 +112,36 @@ def _write_bag(path, log, wheels="joints", imu_axis="z", tf_lever=None, no_fix_e
             q = {"x": Q(x=0.0, y=-h, z=0.0, w=h), "y": Q(x=h, y=0.0, z=0.0, w=h), "z": Q(x=0.0, y=0.0, z=0.0, w=1.0),
                  "-z": Q(x=1.0, y=0.0, z=0.0, w=0.0)}[imu_axis]
             trs.append(T["geometry_msgs/msg/TransformStamped"](
-                header=header(t0), child_frame_id="imu_link",
+                header=header(0.0), child_frame_id="imu_link",
                 transform=T["geometry_msgs/msg/Transform"](translation=V3(x=0.1, y=0.0, z=0.2), rotation=q)))
         if trs:
             ct = w.add_connection("/tf_static", "tf2_msgs/msg/TFMessage", typestore=ts)
-            w.write(ct, int(t0 * 1e9), ts.serialize_cdr(T["tf2_msgs/msg/TFMessage"](transforms=trs),
+            w.write(ct, at(0.0), ser(T["tf2_msgs/msg/TFMessage"](transforms=trs),
                                                         "tf2_msgs/msg/TFMessage"))
         g = log.gps
         for k, (t, x, y) in enumerate(zip(g.t, g.x, g.y)):
             cov = np.zeros(9)
             cov[0] = cov[4] = r.gps_sigma**2
             bad = no_fix_every and k % no_fix_every == 0
-            hd = header(t + t0)
+            hd = header(t)
             hd.frame_id = "gps"
             msg = T["sensor_msgs/msg/NavSatFix"](
                 header=hd, status=T["sensor_msgs/msg/NavSatStatus"](status=-1 if bad else 0, service=1),
                 latitude=LAT0 + np.degrees(y / M) + (1.0 if bad else 0.0),
                 longitude=LON0 + np.degrees(x / (N * np.cos(np.radians(LAT0)))),
                 altitude=200.0, position_covariance=cov, position_covariance_type=2)
-            w.write(cg, int((t + t0) * 1e9), ts.serialize_cdr(msg, "sensor_msgs/msg/NavSatFix"))
+            w.write(cg, at(t), ser(msg, "sensor_msgs/msg/NavSatFix"))
         sign = -1.0 if imu_axis.startswith("-") else 1.0
         for t, om in zip(log.gyro.t, log.gyro.omega):
             rate = {a: (sign * om if a == imu_axis[-1] else 0.001 * np.sin(7 * t)) for a in "xyz"}
-            hd = header(t + t0)
+            hd = header(t)
             hd.frame_id = "imu_link"
             msg = T["sensor_msgs/msg/Imu"](header=hd, orientation=Q(x=0.0, y=0.0, z=0.0, w=1.0),
                                            orientation_covariance=np.zeros(9), angular_velocity=V3(**rate),
                                            angular_velocity_covariance=np.zeros(9),
                                            linear_acceleration=V3(x=0.0, y=0.0, z=9.81),
                                            linear_acceleration_covariance=np.zeros(9))
-            w.write(ci, int((t + t0) * 1e9), ts.serialize_cdr(msg, "sensor_msgs/msg/Imu"))
+            w.write(ci, at(t), ser(msg, "sensor_msgs/msg/Imu"))
 
 
 @pytest.fixture(scope="module")
@@ -196,9 +212,11 @@ def test_odometry_bag_imports_without_options(odom_bag):
     log = import_rosbag(path, track_width=src.robot.track_width)
     e, r = src.encoders, src.robot
     dt = np.diff(e.t)
-    # v -/+ omega b/2 gives the wheel speeds back, stamped on the real clock to 1e-6 s
+    # v -/+ omega b/2 gives the wheel speeds back, stamped on the real clock
+    # (counted from its first whole second) to the nanosecond the bag holds
     np.testing.assert_allclose(log.wheel_speeds.v_left, e.ticks_left[1:] / (r.ticks_per_meter_left * dt), atol=1e-9)
-    np.testing.assert_allclose(log.wheel_speeds.t - 1.7e9, e.t[1:], atol=1e-6)
+    assert log.t_origin == 1_700_000_000
+    np.testing.assert_allclose(log.wheel_speeds.t, e.t[1:], atol=1e-9, rtol=0)
     # the y axis is found and taken, with a warning
     np.testing.assert_allclose(log.gyro.omega, src.gyro.omega, atol=1e-12)
     assert len(log.warnings) == 1 and "IMU's y axis" in log.warnings[0]
@@ -284,16 +302,21 @@ def test_the_jackal_bag_calibrates_ratio_and_track_and_holds_the_common_scale(tm
     assert not any("calibration window" in w for w in rep["warnings"])
 
 
-@pytest.mark.parametrize("storage", ["sqlite3", "mcap"])
-@pytest.mark.parametrize("wheels,imu_axis,imu_tf", [("joints", "x", True), ("odometry", "y", False),
-                                                     ("twist", "x", False), ("twist", "-z", True)])
+MOUNTINGS = [("joints", "x", True), ("odometry", "y", False), ("twist", "x", False), ("twist", "-z", True)]
+
+
+@pytest.mark.parametrize("storage,wheels,imu_axis,imu_tf",
+                         [(s, *m) for s in ("sqlite3", "mcap") for m in MOUNTINGS]
+                         + [("ros1", "joints", "-z", True), ("ros1", "odometry", "x", False),
+                            ("ros1", "twist", "y", True)])
 def test_every_format_wheel_type_and_imu_mounting_calibrates_back(tmp_path, storage, wheels, imu_axis, imu_tf):
-    """ROS 2 sqlite3 and mcap (ROS 1 .bag: the Jackal test); JointState,
+    """ROS 1 .bag, ROS 2 sqlite3 and mcap, written with rosbags; JointState,
     Odometry and TwistStamped wheels; the IMU's yaw on another axis, found
-    through /tf_static or from the data. Each calibrates back to 0.5 %."""
+    through /tf_static or from the data; NavSatFix with covariance and every
+    15th fix without a fix. Each calibrates back to 0.5 %."""
     seed = {"joints": 6, "odometry": 7, "twist": 8}[wheels]
     src = simulate(paper(60).with_(slips=()), seed)
-    p = tmp_path / f"{wheels}-{storage}"
+    p = tmp_path / (f"{wheels}.bag" if storage == "ros1" else f"{wheels}-{storage}")
     _write_bag(p, src, wheels=wheels, imu_axis=imu_axis, imu_tf=imu_tf, storage=storage, tf_lever=(-0.45, 0.0),
                no_fix_every=15)
     log = import_rosbag(p, wheel_radius=R_WHEEL, track_width=src.robot.track_width)
@@ -318,26 +341,82 @@ def test_receive_stamps_are_an_option(odom_bag):
         import_rosbag(path, track_width=0.6, stamps="arrival")
 
 
-def test_a_real_clock_gives_the_same_estimates(tmp_path):
-    """Bags on a real clock start near 1.7e9 s, where a float64 stamp is
-    quantised to 2.4e-7 s, so each interval moves by up to that much: about
-    5e-6 of a 20 Hz interval. Every estimator's states agree to 1e-5 (measured
-    1.7e-6 to 6.4e-6; the EKF's velocities see each interval directly), and
-    the written states.csv keeps the microseconds."""
-    from odomgraph.io.estimate import write_estimate
-    from odomgraph.pipeline import summary
-    log = simulate(paper(40).with_(slips=()), 3)
-    t0 = 1.7e9
+def _same(got, want, path=""):
+    """``got`` holds every entry of ``want``: numbers to 1e-9 relative, the rest equal."""
+    if isinstance(want, dict):
+        for k, v in want.items():
+            _same(got[k], v, f"{path}.{k}")
+    elif isinstance(want, (list, tuple)):
+        assert len(got) == len(want), path
+        for k, (g, w) in enumerate(zip(got, want)):
+            _same(g, w, f"{path}[{k}]")
+    elif isinstance(want, float):
+        assert got == pytest.approx(want, rel=1e-9, abs=1e-12), path
+    else:
+        assert got == want, path
 
-    def shift(x):
-        return replace(x, t=x.t + t0)
-    big = log.with_(encoders=shift(log.encoders), gps=shift(log.gps), gyro=shift(log.gyro), truth=shift(log.truth))
+
+def test_a_real_clock_gives_the_same_estimates(tmp_path):
+    """A log on a real clock (stamps near 1.7e9 s, where a float64 keeps only
+    0.24 us) reads into whole seconds since its origin, exactly: every
+    estimator then gives the same states to 1e-9 relative (measured: at most
+    4e-11 m, the EKF; 2e-13 the smoothers), the states.csv it writes holds the absolute stamps, digit
+    for digit, and the comparison's metrics are the same."""
+    import json
+
+    from odomgraph.analysis.compare import comparison_metrics
+    from odomgraph.io.log import write_log
+    from odomgraph.pipeline import estimate_to_dir
+    src = simulate(paper(40).with_(slips=()), 3)
+    origin = 1_700_000_000
+    write_log(src, tmp_path / "small")
+    write_log(src.with_(t_origin=origin), tmp_path / "big")
+    a, b = read_log(tmp_path / "small"), read_log(tmp_path / "big")
+    first = (tmp_path / "big" / "encoders.csv").read_text().splitlines()[1].split(",")[0]
+    assert first == f"{origin + int(src.encoders.t[0])}.{round((src.encoders.t[0] % 1) * 1e6):06d}"
+    assert (a.t_origin, b.t_origin) == (0, origin)
+    for name in ("encoders", "gps", "gyro", "truth"):
+        np.testing.assert_allclose(getattr(b, name).t, getattr(a, name).t, rtol=0, atol=1e-12)
+    sched = Schedule(20.0)
+    ests = {}
     for m in Method:
-        a, b = estimate(log, m, Schedule(20.0)), estimate(big, m, Schedule(20.0))
-        assert a.mean.shape == b.mean.shape
-        np.testing.assert_allclose(b.t - t0, a.t, atol=5e-7, rtol=0)
-        np.testing.assert_allclose(b.mean, a.mean, atol=1e-5, rtol=0)
-        np.testing.assert_allclose(b.sigma, a.sigma, atol=1e-5, rtol=0)
-    d = write_estimate(b, tmp_path / "est", summary(b, big, Schedule(20.0)))
-    row = (d / "states.csv").read_text().splitlines()[1].split(",")
-    assert abs(float(row[0]) - b.t[0]) < 1e-6
+        ea, eb = estimate(a, m, sched), estimate(b, m, sched)
+        assert eb.t_origin == origin
+        np.testing.assert_allclose(eb.t, ea.t, rtol=0, atol=1e-12)
+        for got, want in ((eb.mean, ea.mean), (eb.sigma, ea.sigma)):
+            # relative to each column's magnitude (a slip of 0 has no relative error of its own)
+            rel = np.abs(got - want) / np.maximum(np.abs(want).max(axis=0), 1e-300)
+            assert rel.max() <= 1e-9, (m, float(rel.max()))
+        ests[m.value] = (ea, eb)
+    # the reports: the comparison's metrics, and what estimate writes
+    ma = comparison_metrics({k: v[0] for k, v in ests.items()}, a, sched)
+    mb = comparison_metrics({k: v[1] for k, v in ests.items()}, b, sched)
+    for label, row in ma["estimators"].items():
+        _same(mb["estimators"][label], {k: v for k, v in row.items() if k not in ("wall_time_s", "updates_per_second")})
+    sa = estimate_to_dir(a, tmp_path / "out-a", Method.isam2, sched)
+    sb = estimate_to_dir(b, tmp_path / "out-b", Method.isam2, sched)
+    assert (sa["t_origin"], sb["t_origin"]) == (0, origin)
+    _same(sb, {k: v for k, v in sa.items() if k not in ("log", "t_origin", "wall_time_s", "updates_per_second",
+                                                         "update_time_ms")})
+    for f in ("states.csv", "online.csv"):
+        ra = (tmp_path / "out-a" / f).read_text().splitlines()[1:]
+        rb = (tmp_path / "out-b" / f).read_text().splitlines()[1:]
+        for la, lb in zip(ra, rb):
+            ta, tb = la.split(",")[0], lb.split(",")[0]
+            whole, frac = ta.split(".")
+            assert tb == f"{origin + int(whole)}.{frac}"
+    first_state = (tmp_path / "out-b" / "states.csv").read_text().splitlines()[1].split(",")[0]
+    assert (tmp_path / "out-b" / "trajectory.tum").read_text().split(None, 1)[0] == first_state
+
+
+def test_a_real_clock_bag_keeps_every_nanosecond(tmp_path):
+    """The importer takes a bag's stamps as integer nanoseconds: the same
+    bag on a real clock imports to the same intervals, exactly."""
+    src = simulate(paper(20).with_(slips=()), 4)
+    _write_bag(tmp_path / "zero", src, wheels="odometry")
+    _write_bag(tmp_path / "real", src, wheels="odometry", t0=1_700_000_000)
+    a = import_rosbag(tmp_path / "zero", track_width=src.robot.track_width)
+    b = import_rosbag(tmp_path / "real", track_width=src.robot.track_width)
+    assert (a.t_origin, b.t_origin) == (0, 1_700_000_000)
+    for name in ("wheel_speeds", "gps", "gyro"):
+        np.testing.assert_array_equal(getattr(b, name).t, getattr(a, name).t)

@@ -43,6 +43,8 @@ def run_comparison(log: Log, schedule: Schedule, progress_for=None, **options) -
     each run. ``options`` are passed to every estimator (see pipeline.estimate),
     except ``range_bias``, which only the batch smoother estimates.
     """
+    from odomgraph.io.log import rebased
+    log = rebased(log)  # Log.t_origin
     from odomgraph.estimators.ekf import EKFOptions, run_ekf
     from odomgraph.pipeline import Method, estimate
     if schedule.calibrate_until is None:

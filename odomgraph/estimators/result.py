@@ -74,6 +74,8 @@ class Estimate:
     """Wall time of each incremental update [s] (incremental smoothers)."""
     range_bias: dict[str, dict[str, float]] | None = None
     """Estimated constant range bias per beacon id, {"value", "sigma"} [m] (batch --range-bias)."""
+    t_origin: int = 0
+    """``t`` counts seconds from this integer second of the log's clock (Log.t_origin)."""
 
     def __post_init__(self):
         n = len(self.t)

@@ -136,6 +136,8 @@ def read_table(path: Path, required: tuple[str, ...], optional: tuple[str, ...] 
             k = int(np.argmax(bad))
             raise LogFormatError(path, f"column '{name}': {shown(col[k])} is not a finite number", lines[k])
         out[name] = arr
+        if name == "t" and len(arr) and float(np.max(arr)) >= ORIGIN_ABOVE:
+            out["_t_sec"], out["_t_frac"] = split_stamps(col)
     if "t" in out and len(out["t"]) > 1:
         dt = np.diff(out["t"])
         wrong = dt < 0 if equal_times else dt <= 0
@@ -145,6 +147,46 @@ def read_table(path: Path, required: tuple[str, ...], optional: tuple[str, ...] 
             raise LogFormatError(path, f"time {what} (t = {float(out['t'][k]):.9g} after "
                                        f"{float(out['t'][k - 1]):.9g})", lines[k])
     return out
+
+
+#: Stamps from this many seconds on are on a real clock (1.7e9 s since 1970),
+#: where a float64 keeps only 0.24 us: they are split into integer seconds and
+#: a fraction as they are read, and the log counts from an integer origin.
+ORIGIN_ABOVE = 1e6
+
+
+def split_stamps(col: list[str]) -> tuple[np.ndarray, np.ndarray]:
+    """Decimal time stamps as (integer seconds int64, fraction float in [0, 1)),
+    exact to the fraction's float precision: "1700000012.345678" gives
+    (1700000012, 0.345678), where float("1700000012.345678") is 2e-7 off.
+    A stamp in exponent notation carries no more digits than its float."""
+    sec = np.empty(len(col), dtype=np.int64)
+    frac = np.empty(len(col))
+    for k, v in enumerate(col):
+        head, dot, tail = v.partition(".")
+        if head.lstrip("+").isdigit() and (not tail or tail.isdigit()):
+            sec[k], frac[k] = int(head), float("0." + tail) if tail else 0.0
+        else:
+            x = float(v)
+            sec[k] = int(np.floor(x))
+            frac[k] = x - sec[k]
+    return sec, frac
+
+
+def stamp_text(t: np.ndarray, origin: int = 0, decimals: int = 6) -> np.ndarray:
+    """Times ``t`` [s since ``origin``, an integer second] as decimal strings of
+    the absolute stamp with ``decimals`` places, exact in the integer part:
+    (12.345678, 1700000000) gives "1700000012.345678"."""
+    t = np.asarray(t, dtype=float)
+    if not origin:
+        return np.char.mod(f"%.{decimals}f", t) if len(t) else np.zeros(0, dtype=str)
+    # t - floor(t) is exact in float64, so each fraction rounds to the digits
+    # "%.{decimals}f" gives t itself on a small clock (round half to even included).
+    whole = np.floor(t)
+    frac = np.char.mod(f"%.{decimals}f", t - whole)
+    carry = np.char.startswith(frac, "1")  # 0.9999996 -> "1.000000"
+    sec = (whole + carry).astype(np.int64) + np.int64(origin)
+    return np.asarray([f"{s}{f[1:]}" for s, f in zip(sec.tolist(), frac.tolist())], dtype=str)
 
 
 def write_table(path: Path, columns: dict[str, np.ndarray], formats: dict[str, str] | None = None,

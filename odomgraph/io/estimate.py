@@ -9,27 +9,28 @@ import numpy as np
 from odomgraph import state as S
 from odomgraph.errors import LogFormatError
 from odomgraph.estimators.result import Estimate
-from odomgraph.io.csvtable import read_table, write_table
+from odomgraph.io.csvtable import read_table, stamp_text, write_table
 from odomgraph.io.outdir import atomic_output_dir
 
 
 def states_columns(est: Estimate) -> dict[str, np.ndarray]:
-    cols = {"t": est.t}
+    """states.csv's columns; ``t`` as the absolute stamps' text (Estimate.t_origin)."""
+    cols = {"t": stamp_text(est.t, est.t_origin)}
     cols.update({name: est.mean[:, i] for i, name in enumerate(S.NAMES)})
     cols.update({f"sigma_{name}": est.sigma[:, i] for i, name in enumerate(S.NAMES)})
     return cols
 
 
 def write_states(path: Path, est: Estimate) -> None:
-    write_table(path, states_columns(est), {k: "%.9g" for k in states_columns(est)} | {"t": "%.6f"})
+    write_table(path, states_columns(est), {k: "%.9g" for k in S.NAMES + tuple(f"sigma_{n}" for n in S.NAMES)})
 
 
 def tum_text(est: Estimate) -> str:
     """TUM trajectory lines ``t x y z qx qy qz qw`` (z = 0, yaw-only quaternion)."""
     th = est.mean[:, S.THETA]
-    rows = np.column_stack([est.t, est.mean[:, S.X], est.mean[:, S.Y], np.zeros_like(th), np.zeros_like(th),
-                            np.zeros_like(th), np.sin(th / 2), np.cos(th / 2)])
-    return "".join(f"{r[0]:.6f} {r[1]:.6f} {r[2]:.6f} 0 0 0 {r[6]:.9f} {r[7]:.9f}\n" for r in rows)
+    rows = np.column_stack([est.mean[:, S.X], est.mean[:, S.Y], np.sin(th / 2), np.cos(th / 2)])
+    return "".join(f"{t} {r[0]:.6f} {r[1]:.6f} 0 0 0 {r[2]:.9f} {r[3]:.9f}\n"
+                   for t, r in zip(stamp_text(est.t, est.t_origin), rows))
 
 
 def write_estimate(est: Estimate, out_dir: Path | str, summary: dict, inputs=()) -> Path:
@@ -51,4 +52,8 @@ def read_states(path: Path | str) -> Estimate:
     sigma = np.column_stack([c[f"sigma_{n}"] for n in S.NAMES])
     if len(c["t"]) == 0:
         raise LogFormatError(path, "has no rows")
-    return Estimate(method=Path(path).parent.name, t=c["t"], mean=mean, sigma=sigma)
+    origin, t = 0, c["t"]
+    if "_t_sec" in c:  # a real clock: count from its first whole second, as read_log does
+        origin = int(c["_t_sec"][0])
+        t = (c["_t_sec"] - origin).astype(float) + c["_t_frac"]
+    return Estimate(method=Path(path).parent.name, t=t, mean=mean, sigma=sigma, t_origin=origin)

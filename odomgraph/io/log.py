@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from odomgraph.errors import LogFormatError
-from odomgraph.io.csvtable import header_of, read_text, shown, text_lines, write_table
+from odomgraph.io.csvtable import ORIGIN_ABOVE, header_of, read_text, shown, stamp_text, text_lines, write_table
 from odomgraph.io.csvtable import read_table as _read_table
 from odomgraph.io.geodesy import latlon_to_local
 from odomgraph.io.outdir import atomic_output_dir
@@ -106,6 +106,12 @@ class Log:
     notes: tuple[str, ...] = field(default=())
     warnings: tuple[str, ...] = field(default=())
     """What reading the files repaired (duplicated rows dropped), one line each."""
+    t_origin: int = 0
+    """Every ``t`` counts seconds from this integer second of the log's clock.
+    0 for logs on a small clock; a log on a real clock (stamps near 1.7e9 s,
+    where float64 keeps 0.24 us) counts from the wheels' first whole second,
+    so intervals keep their full precision. Files odomgraph writes carry the
+    absolute stamps again."""
 
     @property
     def t_start(self) -> float:
@@ -148,10 +154,18 @@ def read_log(directory: Path | str) -> Log:
     robot = load_robot(d / "robot.toml")
     enc = ws = gps = gyro = rng = vel = truth = None
     dups: dict[str, int] = {}
+    origin: list[int] = []
 
     def read_table(p, *a, **k):
         c = _read_table(p, *a, **k)
         dups[p.name] = int(c["_duplicates"])
+        # The wheels are read first and set the origin (see Log.t_origin).
+        if not origin:
+            origin.append(int(c["_t_sec"][0]) if "_t_sec" in c else 0)
+        if "_t_sec" in c:
+            c["t"] = (c["_t_sec"] - origin[0]).astype(float) + c["_t_frac"]
+        elif origin[0] and "t" in c:
+            c["t"] = c["t"] - origin[0]
         return c
     if _optional(d / "encoders.csv") and _optional(d / "wheel_speeds.csv"):
         raise LogFormatError(d, "has both encoders.csv and wheel_speeds.csv; they are alternatives "
@@ -208,7 +222,8 @@ def read_log(directory: Path | str) -> Log:
             raise LogFormatError(p, f"scale factors must be positive finite numbers, got {list(scales)}")
     warn = tuple(f"{name}: {int(n)} row(s) written twice (same stamp and values) were read once"
                  for name, n in dups.items() if n)
-    log = Log(robot, enc, ws, gps, gyro, rng, vel, truth, scales, path=d, warnings=warn)
+    log = Log(robot, enc, ws, gps, gyro, rng, vel, truth, scales, path=d, warnings=warn,
+              t_origin=origin[0] if origin else 0)
     check_log(log)
     return log
 
@@ -317,7 +332,7 @@ def check_clock(log: Log) -> None:
         obj = getattr(log, key)
         if obj is None or len(obj.t) == 0:
             continue
-        t = obj.t
+        t = obj.t + log.t_origin  # the messages name the stamps as written
         big = np.abs(t) > MAX_ABS_TIME
         if big.any():
             v = float(t[np.argmax(big)])
@@ -370,36 +385,56 @@ def _read_gps(p: Path, robot: RobotConfig, read_table=_read_table) -> Gps:
     return Gps(c["t"], x, y, sigma)
 
 
+def rebased(log: Log) -> Log:
+    """``log`` counting from an integer origin when its stamps are on a real
+    clock (see Log.t_origin); unchanged when they are small or already are.
+    Subtracting a nearby whole second is exact in float64, so this loses
+    nothing; it keeps later differences of large stamps from losing more."""
+    if not log.sensors() or abs(log.t_start) < ORIGIN_ABOVE:
+        return log
+    o = int(np.floor(log.t_start))
+
+    def shift(obj):
+        return None if obj is None else replace(obj, t=obj.t - o)
+    return replace(log, t_origin=log.t_origin + o,
+                   **{k: shift(getattr(log, k)) for k in (*_FILES,)})
+
+
 def write_log(log: Log, directory: Path | str, inputs=()) -> Path:
     """Write ``log`` as a log directory (atomically; ``inputs`` are paths the
     output must not touch, see io.outdir). Returns the path."""
     check_log(log)
+    log = rebased(log)
+    o = log.t_origin
+
+    def T(t):  # absolute stamps, exact in the whole seconds
+        return stamp_text(t, o)
     with atomic_output_dir(directory, inputs, kind="log") as d:
         (d / "robot.toml").write_text(robot_toml(log.robot), encoding="utf-8")
         if log.encoders is not None:
             e = log.encoders
-            write_table(d / "encoders.csv", {"t": e.t, "ticks_left": e.ticks_left, "ticks_right": e.ticks_right},
+            write_table(d / "encoders.csv", {"t": T(e.t), "ticks_left": e.ticks_left, "ticks_right": e.ticks_right},
                         {"t": "%.6f", "ticks_left": "%.0f", "ticks_right": "%.0f"})
         if log.wheel_speeds is not None:
             w = log.wheel_speeds
-            write_table(d / "wheel_speeds.csv", {"t": w.t, "v_left": w.v_left, "v_right": w.v_right},
+            write_table(d / "wheel_speeds.csv", {"t": T(w.t), "v_left": w.v_left, "v_right": w.v_right},
                         {"t": "%.6f", "v_left": "%.6f", "v_right": "%.6f"})
         if log.gps is not None:
             g = log.gps
-            cols = {"t": g.t, "x": g.x, "y": g.y, **({"sigma": g.sigma} if g.sigma is not None else {})}
+            cols = {"t": T(g.t), "x": g.x, "y": g.y, **({"sigma": g.sigma} if g.sigma is not None else {})}
             write_table(d / "gps.csv", cols, {"t": "%.6f", "x": "%.5f", "y": "%.5f", "sigma": "%.5f"})
         if log.gyro is not None:
-            write_table(d / "gyro.csv", {"t": log.gyro.t, "omega": log.gyro.omega}, {"t": "%.6f", "omega": "%.7f"})
+            write_table(d / "gyro.csv", {"t": T(log.gyro.t), "omega": log.gyro.omega}, {"t": "%.6f", "omega": "%.7f"})
         if log.ranges is not None:
             r = log.ranges
             ids = np.asarray([log.robot.beacons[i].id for i in r.beacon], dtype=str)
-            write_table(d / "ranges.csv", {"t": r.t, "beacon": ids, "range": r.range}, {"t": "%.6f", "range": "%.5f"})
+            write_table(d / "ranges.csv", {"t": T(r.t), "beacon": ids, "range": r.range}, {"t": "%.6f", "range": "%.5f"})
         if log.velocity is not None:
             v = log.velocity
-            write_table(d / "velocity.csv", {"t": v.t, "v": v.v, "omega": v.omega},
+            write_table(d / "velocity.csv", {"t": T(v.t), "v": v.v, "omega": v.omega},
                         {"t": "%.6f", "v": "%.6f", "omega": "%.6f"})
         if log.truth is not None:
-            write_table(d / "truth.csv", {"t": log.truth.t, **log.truth.values}, {"t": "%.6f"})
+            write_table(d / "truth.csv", {"t": T(log.truth.t), **log.truth.values}, {"t": "%.6f"})
         if log.truth_scales is not None:
             sl, sr, sb = log.truth_scales
             (d / "truth.toml").write_text(f"scale_left = {float(sl)!r}\nscale_right = {float(sr)!r}\n"

@@ -23,8 +23,11 @@ Topics are picked by their type when the choice is unambiguous, or given:
   with a warning when that is not +z; the mounting in /tf_static
   (base_link -> the IMU's frame) is used when the bag has it.
 
-Times are the messages' header stamps, the clock the sensors share; bags on
-a real clock start near 1.7e9 s, where float64 keeps 0.2 us.
+Times are the messages' header stamps, the clock the sensors share (or the
+bag's receive times). Bags on a real clock start near 1.7e9 s, where a
+float64 keeps only 0.24 us: the log counts from the first whole second
+(Log.t_origin), taken from the integer nanoseconds, so no interval loses a
+digit, and the files written carry the absolute stamps.
 """
 from __future__ import annotations
 
@@ -34,6 +37,7 @@ from pathlib import Path
 import numpy as np
 
 from odomgraph.errors import LogFormatError
+from odomgraph.io.csvtable import ORIGIN_ABOVE
 from odomgraph.io.geodesy import latlon_to_local
 from odomgraph.io.log import Gps, Gyro, Log, WheelSpeeds
 from odomgraph.io.robot import RobotConfig
@@ -72,8 +76,9 @@ def _reader(bag: Path):
     return AnyReader([bag], default_typestore=get_typestore(Stores.ROS2_HUMBLE))
 
 
-def _stamp(msg) -> float:
-    return msg.header.stamp.sec + 1e-9 * msg.header.stamp.nanosec
+def _stamp_ns(msg) -> int:
+    """The header stamp in integer nanoseconds (exact; a float of 1.7e18 ns is not)."""
+    return int(msg.header.stamp.sec) * 1_000_000_000 + int(msg.header.stamp.nanosec)
 
 
 def _increasing(t: np.ndarray, *cols):
@@ -243,9 +248,16 @@ def import_rosbag(bag: Path | str, wheel_topic: str | None = None, left_joint: s
                                           "--wheel-radius [m]")
             use = [c for c in conns if c.topic in chosen.values()]
             joints = None
+            origin_ns = None
             for conn, t_rx, raw in reader.messages(connections=use):
                 msg = reader.deserialize(raw, conn.msgtype)
-                stamp = 1e-9 * t_rx if stamps == "receive" else _stamp(msg)
+                ns = int(t_rx) if stamps == "receive" else _stamp_ns(msg)
+                if origin_ns is None:
+                    # A real clock counts from the first whole second (Log.t_origin): the
+                    # difference of integer nanoseconds is exact, and so is every interval.
+                    whole = ns // 1_000_000_000
+                    origin_ns = whole * 1_000_000_000 if whole >= ORIGIN_ABOVE else 0
+                stamp = 1e-9 * (ns - origin_ns)
                 if conn.topic == chosen["wheels"]:
                     if kind == "joints":
                         names = list(msg.name)
@@ -314,7 +326,8 @@ def import_rosbag(bag: Path | str, wheel_topic: str | None = None, left_joint: s
                         encoder_sigma=tuple(encoder_sigma), gps_sigma=gps_sigma, gps_origin=origin,
                         gps_lever_arm=tuple(float(v) for v in (gps_lever_arm or (0.0, 0.0))),
                         gyro_sigma=gyro_sigma)
-    return Log(robot=robot, wheel_speeds=ws, gps=gps, gyro=gyro, notes=tuple(notes), warnings=tuple(warnings))
+    return Log(robot=robot, wheel_speeds=ws, gps=gps, gyro=gyro, notes=tuple(notes), warnings=tuple(warnings),
+               t_origin=(origin_ns or 0) // 1_000_000_000)
 
 
 def _wheel_speeds(bag, topic, kind, rows, wheel_radius, track_width) -> WheelSpeeds:
