@@ -136,7 +136,8 @@ def read_table(path: Path, required: tuple[str, ...], optional: tuple[str, ...] 
             k = int(np.argmax(bad))
             raise LogFormatError(path, f"column '{name}': {shown(col[k])} is not a finite number", lines[k])
         out[name] = arr
-        if name == "t" and len(arr) and float(np.max(arr)) >= ORIGIN_ABOVE:
+        # (beyond ORIGIN_BELOW a stamp is no seconds; the clock check says so)
+        if name == "t" and len(arr) and ORIGIN_ABOVE <= float(np.max(arr)) and float(np.max(np.abs(arr))) < ORIGIN_BELOW:
             out["_t_sec"], out["_t_frac"] = split_stamps(col)
     if "t" in out and len(out["t"]) > 1:
         dt = np.diff(out["t"])
@@ -153,6 +154,7 @@ def read_table(path: Path, required: tuple[str, ...], optional: tuple[str, ...] 
 #: where a float64 keeps only 0.24 us: they are split into integer seconds and
 #: a fraction as they are read, and the log counts from an integer origin.
 ORIGIN_ABOVE = 1e6
+ORIGIN_BELOW = 1e15
 
 
 def split_stamps(col: list[str]) -> tuple[np.ndarray, np.ndarray]:
