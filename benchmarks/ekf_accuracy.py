@@ -9,7 +9,8 @@ import argparse
 import dataclasses
 
 from benchmarks._common import save
-from odomgraph.analysis.study import run_study, summarize
+from odomgraph.analysis.study import summarize
+from odomgraph.runs import run_study
 from odomgraph.sim.scenarios import paper, yard
 
 TARGETS = {"scale": 0.005, "slip": 0.04, "coverage": 0.95}

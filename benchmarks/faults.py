@@ -15,7 +15,8 @@ import time
 import numpy as np
 
 from benchmarks._common import RESULTS, save
-from odomgraph.analysis.faults import CASES, METHODS, run_case
+from odomgraph.analysis.faults import CASES, METHODS
+from odomgraph.runs import run_case
 
 
 def checks(r: dict) -> list[str]:

@@ -20,7 +20,8 @@ import time
 import numpy as np
 
 from benchmarks._common import RESULTS, save
-from odomgraph.analysis.montecarlo import QUANTITIES, StudySpec, run_study, write_outputs
+from odomgraph.analysis.montecarlo import QUANTITIES, StudySpec, run_study
+from odomgraph.analysis.montecarlo_report import write_outputs
 from odomgraph.analysis.montecarlo_report import findings, quantity_grid
 
 

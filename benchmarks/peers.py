@@ -11,8 +11,8 @@ from __future__ import annotations
 import numpy as np
 from filterpy.kalman import ExtendedKalmanFilter
 
-from factors._math import wrap_angle
-from factors.motion import propagate
+from odomgraph.factors._math import wrap_angle
+from odomgraph.factors.motion import propagate
 from odomgraph import state as S
 from odomgraph.estimators.ekf import EKF, add_process_noise
 from odomgraph.estimators.schedule import Hold, Schedule
@@ -73,7 +73,7 @@ def straightforward_graph(prob, k0: int = 0, k1: int | None = None):
     """NonlinearFactorGraph of intervals k0..k1-1 (plus the prior when k0 == 0)."""
     import gtsam
     from gtsam.symbol_shorthand import S as SK, W as WK, X as XK
-    from factors import gtsam_factors as gf
+    from odomgraph.factors import gtsam_factors as gf
     from odomgraph.estimators.incremental import S_IDX, W_IDX
     kf, r, pn = prob.kf, prob.robot, prob.robot.process
     k1 = kf.n - 1 if k1 is None else k1
@@ -144,7 +144,7 @@ def straightforward_isam2(log, schedule, options, time_limit: float = 600.0):
     """One ISAM2 update per keyframe with CustomFactors. Returns (seconds, per-update times, completed)."""
     import time
     import gtsam
-    from factors.motion import propagate
+    from odomgraph.factors.motion import propagate
     from odomgraph.estimators import batch as B
     prob = B.build_problem(log, schedule, options)
     n = prob.kf.n

@@ -21,7 +21,8 @@ import numpy as np
 
 from benchmarks._common import RESULTS, save
 from odomgraph.analysis.bounds import track_width_bound
-from odomgraph.analysis.study import run_study, summarize
+from odomgraph.analysis.study import summarize
+from odomgraph.runs import run_study
 from odomgraph.sim.scenarios import paper
 
 BOUND_SEEDS = 200

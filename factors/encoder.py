@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from factors._math import shape_of
+from odomgraph.factors._math import shape_of
 
 INPUTS = ("v", "omega", "slip_left", "slip_right", "scale_left", "scale_right", "scale_track")
 

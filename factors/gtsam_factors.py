@@ -23,8 +23,8 @@ from functools import partial
 import gtsam
 import numpy as np
 
-from factors import encoder, gps, gyro, pose2, pseudo, ranging, velocity
-from factors.motion import arc_at, propagate, transition_residual
+from odomgraph.factors import encoder, gps, gyro, pose2, pseudo, ranging, velocity
+from odomgraph.factors.motion import arc_at, propagate, transition_residual
 
 
 def _pose(values, key):

@@ -24,7 +24,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from factors._math import dsinc, shape_of, sinc
+from odomgraph.factors._math import dsinc, shape_of, sinc
 
 INPUTS = ("x", "y", "theta", "v", "omega")
 
@@ -110,7 +110,7 @@ def transition_residual(x, y, theta, v, omega, dt, x1, y1, theta1):
         J0: (..., 3, 5) d e / d (x, y, theta, v, omega) of the first pose and velocity.
         J1: (..., 3, 3) d e / d (x1, y1, theta1), world-frame coordinates.
     """
-    from factors._math import wrap_angle
+    from odomgraph.factors._math import wrap_angle
     pred, Jf = propagate(x, y, theta, v, omega, dt)
     shape = pred.shape[:-1]
     tp = pred[..., 2]

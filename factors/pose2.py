@@ -33,7 +33,7 @@ def retract(x, y, theta, d):
     Exp of a Pose2 twist (dx, dy, dtheta) moves along an arc; returns world-frame
     (x', y', theta') arrays (theta' not wrapped).
     """
-    from factors._math import sinc
+    from odomgraph.factors._math import sinc
     d = np.asarray(d, dtype=float)
     dx, dy, dth = d[..., 0], d[..., 1], d[..., 2]
     # Exp: translation V(dth) (dx, dy) with V = [[s/a, -(1-c)/a], [(1-c)/a, s/a]]

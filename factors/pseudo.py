@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from factors._math import shape_of
+from odomgraph.factors._math import shape_of
 
 ZERO_SLIP_INPUTS = ("slip_left", "slip_right")
 HOLD_SCALE_INPUTS = ("scale_left", "scale_right", "scale_track")

@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from factors._math import shape_of
+from odomgraph.factors._math import shape_of
 
 INPUTS = ("v", "omega")
 

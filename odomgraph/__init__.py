@@ -15,7 +15,7 @@ __version__ = "0.1.0"
 #: ``odomgraph.calibrate(log)``, ``odomgraph.simulate(scenario, seed)``.
 _API = {"read_log": "odomgraph.io.log", "write_log": "odomgraph.io.log", "estimate": "odomgraph.pipeline",
         "calibrate": "odomgraph.pipeline", "Method": "odomgraph.pipeline", "Schedule": "odomgraph.estimators.schedule",
-        "simulate": "odomgraph.sim.simulate", "Estimate": "odomgraph.estimators.result"}
+        "simulate": "odomgraph.sim.simulate", "Estimate": "odomgraph.result"}
 __all__ = ["__version__", *_API]
 
 

@@ -426,7 +426,7 @@ def demo(
     """Simulate the paper's scenario (sec. IV), run the EKF, iSAM2 and the batch smoother, and write
     the comparison report (report.html, the paper's figures, metrics.json) with the log and estimates."""
     from odomgraph.estimators.schedule import Schedule
-    from odomgraph.pipeline import compare_to_dir
+    from odomgraph.runs import compare_to_dir
     from odomgraph.sim.scenarios import paper
     from odomgraph.sim.simulate import simulate as run_sim
 
@@ -464,7 +464,7 @@ def compare(
     self-contained report.html, the paper's figures (1-3, 7, NEES/NIS), metrics.json and the estimates.
     Without truth in the log, positions are compared with GPS."""
     from odomgraph.io.log import read_log
-    from odomgraph.pipeline import compare_to_dir
+    from odomgraph.runs import compare_to_dir
     schedule = _parse_schedule(calibrate_until, hold)
     log = read_log(log_dir)
     with _MultiProgress() as bars:
@@ -495,7 +495,8 @@ def montecarlo(
     simulations per grid point with the EKF and the batch smoother, and write results.csv,
     results.json, heatmaps (paper figs. 8-10) and summary.html. An interrupted run resumes
     where it stopped when started again with the same options."""
-    from odomgraph.analysis.montecarlo import StudySpec, run_study, write_outputs
+    from odomgraph.analysis.montecarlo import StudySpec, run_study
+    from odomgraph.analysis.montecarlo_report import write_outputs
     from odomgraph.analysis.montecarlo_report import findings
     from odomgraph.errors import OdomgraphError
     if config not in (1, 2, 3):

@@ -5,7 +5,6 @@
 """
 from __future__ import annotations
 
-from enum import Enum
 from pathlib import Path
 
 import numpy as np
@@ -13,20 +12,14 @@ import numpy as np
 from odomgraph import state as S
 from odomgraph.analysis.metrics import nis_summary, truth_errors
 from odomgraph.errors import CalibrationRejectedError, OdomgraphError
-from odomgraph.estimators.result import Estimate
+from odomgraph.estimators.registry import Method, check_option_names, parse_method
+from odomgraph.estimators.registry import run as _run
 from odomgraph.estimators.schedule import Schedule
 from odomgraph.io.log import Log
+from odomgraph.result import Estimate, status_of
 
-
-class Method(str, Enum):
-    ekf = "ekf"
-    """The paper's velocity-augmented EKF."""
-    batch = "batch"
-    """Factor-graph smoother, Gauss-Newton over the whole log (GTSAM elimination)."""
-    isam2 = "isam2"
-    """Factor-graph smoother, one gtsam.ISAM2 update per keyframe."""
-    fixed_lag = "fixed-lag"
-    """Factor-graph smoother, gtsam.IncrementalFixedLagSmoother."""
+__all__ = ["Method", "parse_method", "estimate", "summary", "status_of", "warnings_of", "estimate_to_dir",
+           "calibrate", "calibrate_to_file", "tune_process_noise"]
 
 
 def estimate(log: Log, method: Method = Method.ekf, schedule: Schedule = Schedule(), progress=None,
@@ -40,7 +33,7 @@ def estimate(log: Log, method: Method = Method.ekf, schedule: Schedule = Schedul
     method = parse_method(method)
     time_offset = bool(options.pop("time_offset", False))
     fit_noise = bool(options.pop("fit_noise", True))
-    _check_option_names(options)
+    check_option_names(options)
     options = {k: v for k, v in options.items() if v is not None}
     from odomgraph.io.log import rebased
     log = rebased(log)  # a real clock's stamps, counted from a whole second (Log.t_origin)
@@ -219,57 +212,6 @@ def _with_time_offset(log: Log, method: Method, schedule: Schedule, progress, op
     return est
 
 
-def _run(log: Log, method: Method, schedule: Schedule, progress, options: dict) -> Estimate:
-    if options.get("range_bias") and method is not Method.batch:
-        from odomgraph.errors import OdomgraphError
-        raise OdomgraphError(f"--range-bias is estimated by the batch smoother only, not by {method.value}")
-    if method is Method.ekf:
-        from odomgraph.estimators.ekf import EKFOptions, run_ekf
-        if schedule.calibrate_until is None:
-            from odomgraph.errors import OdomgraphError
-            raise OdomgraphError("the EKF needs a schedule: --calibrate-until none (slip and scale together) "
-                                 "is for the smoothers; use a number of seconds (0 = slip only)")
-        return run_ekf(log, schedule, EKFOptions(**_only(EKFOptions, options)), progress)
-    if method is Method.batch:
-        from odomgraph.estimators.batch import SmootherOptions, run_batch
-        return run_batch(log, schedule, SmootherOptions(**_only(SmootherOptions, options)), progress)
-    from odomgraph.estimators.incremental import IncrementalOptions, run_fixed_lag, run_isam2
-    run = run_isam2 if method is Method.isam2 else run_fixed_lag
-    return run(log, schedule, IncrementalOptions(**_only(IncrementalOptions, options)), progress)
-
-
-def parse_method(method) -> Method:
-    """A Method from itself or its name; OptionError listing the valid ones otherwise."""
-    from odomgraph.errors import OptionError
-    try:
-        return Method(method.value if isinstance(method, Enum) else method)
-    except ValueError:
-        raise OptionError(f"unknown method {method!r}; valid: {', '.join(m.value for m in Method)}") from None
-
-
-def _check_option_names(options: dict) -> None:
-    """Every option must belong to some estimator's options (a typo is an error,
-    not a default), and lie in its declared range even where this method does
-    not use it (the CLI passes one set to every method)."""
-    from odomgraph.checks import field_ranges, option_name, unknown_names, value_problem, value_text
-    from odomgraph.errors import OptionError
-    from odomgraph.estimators.ekf import EKFOptions
-    from odomgraph.estimators.incremental import IncrementalOptions
-    known = {*EKFOptions.__dataclass_fields__, *IncrementalOptions.__dataclass_fields__}
-    msg = unknown_names(list(options), known, "option")
-    if msg:
-        raise OptionError(msg)
-    ranges = field_ranges(EKFOptions) | field_ranges(IncrementalOptions)
-    for k, v in options.items():
-        if v is not None and k in ranges and (problem := value_problem(v, ranges[k])):
-            raise OptionError(f"{k} ({option_name(k)}) {problem}, got {value_text(v)}")
-
-
-def _only(cls, options: dict) -> dict:
-    """The options that ``cls`` takes (the CLI passes one set for every method)."""
-    return {k: v for k, v in options.items() if k in cls.__dataclass_fields__}
-
-
 def warnings_of(est: Estimate, log: Log | None = None) -> list[str]:
     """Everything the user must know to trust ``est``, one line each: the
     estimator's own warnings (with those ``estimate`` adds: mounting
@@ -296,36 +238,9 @@ def warnings_of(est: Estimate, log: Log | None = None) -> list[str]:
     return out
 
 
-#: A sensor losing more than this share of its measurements to the gate or the
-#: robust loss makes the run "degraded".
-DEGRADED_REJECTED = 0.2
-
-
-def status_of(est: Estimate) -> tuple[str, list[str]]:
-    """("ok" | "recovered" | "degraded", the reasons): recovered when the
-    estimator caught itself diverging and recovered; degraded when a flag
-    says the result is suspect (Estimate.flags), it hit an iteration cap,
-    recovered many times, or lost more than DEGRADED_REJECTED of a sensor's
-    measurements."""
-    why = list(est.flags)
-    for s, n in est.rejected.items():
-        used = est.used.get(s)
-        if used and n / used > DEGRADED_REJECTED:
-            why.append(f"{s}: {n} of {used} measurements rejected")
-    if any("iteration cap" in w for w in est.warnings):
-        why.append("an iteration cap was hit")
-    if len(est.recoveries) > 5:
-        why.append(f"{len(est.recoveries)} recoveries")
-    if why:
-        return "degraded", why
-    if est.recoveries:
-        return "recovered", [f"{len(est.recoveries)} recovery(ies)"]
-    return "ok", []
-
-
 def summary(est: Estimate, log: Log, schedule: Schedule) -> dict:
     """summary.json content (LOG_FORMAT.md plus consistency and throughput)."""
-    from odomgraph.estimators.observability import combinations_of
+    from odomgraph.observability import combinations_of
     from odomgraph.io.log import rebased
     log = rebased(log)  # on est's clock (Log.t_origin)
     out = {
@@ -633,32 +548,3 @@ def calibrate_to_file(log: Log, out: Path, schedule: Schedule = Schedule(calibra
     return new, rep
 
 
-def compare_to_dir(log: Log, out: Path, schedule: Schedule, progress_for=None, title: str | None = None,
-                   include_log: bool = False, **options):
-    """Run the EKF, iSAM2 and batch on ``log`` and write the comparison directory
-    atomically: report.html, metrics.json, the figures, figure.png (overview)
-    and one estimate directory per estimator (isam2/ holds online.csv).
-    ``include_log`` also writes the log itself to out/log (the demo does).
-    Returns the Comparison."""
-    from odomgraph.io.log import rebased
-    log = rebased(log)  # Log.t_origin
-    from odomgraph.analysis.compare import run_comparison
-    from odomgraph.analysis.plots import overview_figure
-    from odomgraph.analysis.report import write_report
-    from odomgraph.io.estimate import write_estimate
-    from odomgraph.io.log import write_log
-    from odomgraph.io.outdir import atomic_output_dir, check_output
-    inputs = (log.path,) if log.path and not include_log else ()
-    check_output(out, inputs)
-    cmp = run_comparison(log, schedule, progress_for, **options)
-    title = title or f"odomgraph: EKF vs smoother on {log.path.name if log.path else 'a log'}"
-    with atomic_output_dir(out, inputs, kind="report") as d:
-        if include_log:
-            write_log(log, d / "log")
-        for label, est in cmp.estimates.items():
-            if label != "isam2-online":  # it is isam2/online.csv
-                write_estimate(est, d / label, summary(est, log, schedule))
-        write_report(cmp, d, title)
-        shown = [e for k, e in cmp.estimates.items() if k in ("ekf", "batch")] or list(cmp.estimates.values())
-        overview_figure(shown, log, d / "figure.png", title=title)
-    return cmp

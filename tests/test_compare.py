@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from typer.testing import CliRunner
 
-from odomgraph.analysis.compare import run_comparison
+from odomgraph.runs import run_comparison
 from odomgraph.analysis.metrics import gps_deviation, range_residuals
 from odomgraph.cli import app
 from odomgraph.estimators.schedule import Schedule
@@ -142,7 +142,7 @@ def test_every_estimator_finishes_the_real_librsf_cut(tmp_path):
     The incremental smoothers once drifted away from the ranges there; with a
     start fitted to the first ranges they finish, as do the EKF and batch."""
     from odomgraph.io.importers.librsf import import_librsf
-    from odomgraph.pipeline import compare_to_dir
+    from odomgraph.runs import compare_to_dir
     log = import_librsf(Path(__file__).parent / "data" / "librsf" / "Indoor_UWB_Input.txt")
     cmp = compare_to_dir(log, tmp_path / "rep", Schedule(0.0))
     est = cmp.metrics["estimators"]
@@ -161,7 +161,7 @@ def test_a_diverging_estimator_is_reported_not_fatal(tmp_path, short_log_dir, mo
     import odomgraph.estimators.incremental as inc
     from odomgraph.errors import EstimatorDivergedError
     from odomgraph.io.log import read_log
-    from odomgraph.pipeline import compare_to_dir
+    from odomgraph.runs import compare_to_dir
 
     def diverge(*a, **k):
         raise EstimatorDivergedError("isam2 diverged at t=12.000 s: the running mean of whitened squared "

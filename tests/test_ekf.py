@@ -5,7 +5,8 @@ import pytest
 
 from odomgraph import state as S
 from odomgraph.analysis.metrics import truth_errors
-from odomgraph.analysis.study import run_study, summarize
+from odomgraph.analysis.study import summarize
+from odomgraph.runs import run_study
 from odomgraph.errors import EstimatorDivergedError
 from odomgraph.estimators.ekf import EKF, run_ekf
 from odomgraph.estimators.schedule import Hold, Schedule
@@ -17,10 +18,14 @@ CONSISTENCY_STATES = ("x", "y", "slip_left", "slip_right", "scale_left", "scale_
 
 
 def _assert_acceptance(summary):
+    # The acceptance targets of issue 2. Measured: paper seeds 12-19 0.0030 (track),
+    # yard seeds 116-119 0.0017; pooled slip RMS 0.039 on both.
     # every scale factor ends within 0.5 % of truth, on every seed
     assert max(summary.scale_rel_error_max) < 0.005, summary.scale_rel_error_max
     # slip RMS after the calibration window below 0.04 m/s per wheel (over all seeds' rows)
     assert max(summary.slip_rms_pooled) < 0.04, summary.slip_rms_pooled
+    # RMS position error: measured 0.022 m (paper), 0.013 m (yard)
+    assert summary.rms_position < 0.05, summary.rms_position
     # consistent, not overconfident: >= 95 % of rows inside +-3 sigma, on the worst seed
     for name in CONSISTENCY_STATES:
         assert summary.coverage_min[name] >= 0.95, (name, summary.coverage_min[name])
@@ -64,11 +69,15 @@ def test_consider_hold_keeps_honest_sigma_and_pseudo_hold_collapses_it(paper_log
     # consider: the scale sigma freezes at its value at the switch
     at_switch = con.sigma[np.argmax(con.t >= con.t_switch), S.SCALE]
     np.testing.assert_allclose(con.sigma[after][:, S.SCALE], np.broadcast_to(at_switch, (after.sum(), 3)), rtol=1e-6)
-    # the paper's pseudo-update drives it towards 0 ...
-    assert np.all(pse.sigma[-1, S.SCALE] < 0.05 * con.sigma[-1, S.SCALE])
-    # ... so pseudo mode reports the sigma at the switch instead, and both agree on values
-    np.testing.assert_allclose(pse.calibration_sigma, at_switch, rtol=0.05)
-    np.testing.assert_allclose(pse.mean[-1, S.SCALE], con.mean[-1, S.SCALE], atol=2e-3)
+    # consider keeps the sigma the calibration earned: measured 0.0016, 0.0015, 0.0027
+    assert np.all((at_switch > 0.0008) & (at_switch < 0.005)), at_switch
+    # the paper's pseudo-update drives it towards 0 (measured ratio 0.0008-0.0015) ...
+    assert np.all(pse.sigma[-1, S.SCALE] < 0.004 * con.sigma[-1, S.SCALE])
+    # ... so pseudo mode reports the sigma at the switch instead (the two runs are the
+    # same filter until the switch: measured equal to the last bit), and both agree
+    # on values (measured 7.5e-7 apart: the pseudo-update barely moves them)
+    np.testing.assert_allclose(pse.calibration_sigma, at_switch, rtol=1e-9)
+    np.testing.assert_allclose(pse.mean[-1, S.SCALE], con.mean[-1, S.SCALE], atol=2e-6)
 
 
 def test_calibrate_until_zero_is_slip_only(paper_log):
@@ -77,14 +86,28 @@ def test_calibrate_until_zero_is_slip_only(paper_log):
     np.testing.assert_array_equal(est.mean[:, S.SCALE], 1.0)
     # with the wrong scale factors, slip absorbs them: right wheel 0.98 -> about -2 % of speed
     err = truth_errors(est, paper_log)
-    assert err.coverage_3sigma["x"] > 0.9
+    assert err.coverage_3sigma["x"] > 0.97           # measured 0.993
+    assert err.rms_position_m < 0.06                 # measured 0.026 m
+    assert max(err.rms_slip_mps.values()) < 0.12      # measured 0.053, 0.046 m/s (0.040 calibrated)
 
 
 def test_schedule_switches_at_the_right_time(paper_log):
     est = run_ekf(paper_log, Schedule(20.0))
     assert est.t_switch == pytest.approx(paper_log.t_start + 20.0)
     before = est.t < est.t_switch
-    assert np.abs(est.mean[before][:, S.SLIP]).max() < 0.01
+    # the zero-slip pseudo-update (sigma 1e-3 m/s by default) pins slip: measured 1.6e-4 m/s at most
+    assert np.abs(est.mean[before][:, S.SLIP]).max() < 5e-4
+    assert np.abs(est.mean[~before][:, S.SLIP]).max() > 0.3          # the 0.5 m/s slips are found after it
+
+
+# Per sensor set: (RMS position [m], largest |final scale error| [-], RMS slip [m/s]),
+# about 2.5x the values measured on seed 4.
+MISSING_SENSOR_BOUNDS = {
+    "gps_only": (0.08, 0.0075, 0.06),       # measured 0.034 m, 0.0030 (track), 0.024 m/s
+    "ranges_only": (0.05, 0.0015, 0.05),    # measured 0.020 m, 0.00051 (right), 0.020 m/s
+    "ranges_gyro": (0.04, 0.0035, 0.09),    # measured 0.016 m, 0.0013 (left), 0.037 m/s
+    "velocity": (0.09, 0.011, 0.095),       # measured 0.039 m, 0.0044 (track), 0.039 m/s
+}
 
 
 @pytest.mark.parametrize("sensors", ["gps_only", "ranges_only", "ranges_gyro", "velocity"])
@@ -106,16 +129,22 @@ def test_missing_sensors(sensors):
     est = run_ekf(log, Schedule(20.0))
     err = truth_errors(est, log)
     assert np.all(np.isfinite(est.mean)) and np.all(np.isfinite(est.sigma))
-    assert err.rms_position_m < 0.1
-    assert err.coverage_3sigma["x"] > 0.9 and err.coverage_3sigma["y"] > 0.9
-    assert max(abs(v) for v in err.final_scale_error.values()) < 0.02
+    pos, scale, slip = MISSING_SENSOR_BOUNDS[sensors]
+    assert err.rms_position_m < pos, err.rms_position_m
+    # measured coverage 0.993-1.0 on every set
+    assert err.coverage_3sigma["x"] > 0.97 and err.coverage_3sigma["y"] > 0.97
+    final = np.array([err.final_scale_error[k] for k in ("left", "right", "track")])
+    assert np.abs(final).max() < scale, final
+    # ...and within 3 sigma of the truth: the sigma is honest (measured |z| <= 1.2)
+    assert np.all(np.abs(final) < 3 * est.sigma[-1, S.SCALE]), (final, est.sigma[-1, S.SCALE])
+    assert max(err.rms_slip_mps.values()) < slip, err.rms_slip_mps
 
 
 def test_slip_without_gyro_stays_bounded():
     log = simulate(paper(60).with_(rates=Rates(gyro=0, gps=20)), 4)
     err = truth_errors(run_ekf(log, Schedule(20.0)), log)
-    assert err.rms_position_m < 0.25
-    assert max(err.rms_slip_mps.values()) < 0.25
+    assert err.rms_position_m < 0.25                   # measured 0.16 m
+    assert max(err.rms_slip_mps.values()) < 0.25       # measured 0.150, 0.107 m/s
 
 
 def test_initialises_from_data_without_initial_pose():
@@ -125,6 +154,8 @@ def test_initialises_from_data_without_initial_pose():
     x0 = ekf.init.x
     truth_at = {k: log.truth.at(k, np.array([ekf.init.t]))[0] for k in ("x", "y", "theta")}
     sig = np.sqrt(np.diag(ekf.init.P))
+    # measured errors -0.17, 0.10, -0.04 sigma, with sigma 0.054 m, 0.064 m, 0.16 rad
+    assert np.all(sig[S.POSE] < [0.15, 0.15, 0.4]), sig[S.POSE]
     assert abs(x0[S.X] - truth_at["x"]) < 3 * sig[S.X]
     assert abs(x0[S.Y] - truth_at["y"]) < 3 * sig[S.Y]
     assert abs(np.angle(np.exp(1j * (x0[S.THETA] - truth_at["theta"])))) < 3 * sig[S.THETA]
@@ -147,10 +178,12 @@ def test_gate_rejects_gps_outliers(paper_log):
     for opt in (EKFOptions(gate=16.0), EKFOptions()):          # an explicit gate, and the default one
         gated = EKF(bad, Schedule(20.0), opt).run()
         err = truth_errors(gated, bad)
+        # measured 0.0237 m for both gates, against 0.0230 m on the clean log
         assert err.rms_position_m < 0.05
-        # every outlier after the start rejected, and (nearly) nothing else
+        assert max(err.rms_slip_mps.values()) < 0.08               # measured 0.0405 m/s (clean 0.0403)
+        # every outlier after the start rejected, and nothing else (measured 48 of 48)
         n_bad = int(np.sum(g.t[::50] >= gated.t[0]))
-        assert n_bad <= gated.rejected["gps"] <= n_bad + 3, (gated.rejected, n_bad)
+        assert gated.rejected["gps"] == n_bad, (gated.rejected, n_bad)
         assert gated.recoveries == []
 
 

@@ -4,8 +4,8 @@ range ~ 0, zero velocity)."""
 import numpy as np
 import pytest
 
-from factors import encoder, gps, gyro, motion, pseudo, ranging, velocity
-from factors._math import dsinc, sinc, wrap_angle
+from odomgraph.factors import encoder, gps, gyro, motion, pseudo, ranging, velocity
+from odomgraph.factors._math import dsinc, sinc, wrap_angle
 
 RNG = np.random.default_rng(7)
 
@@ -237,7 +237,7 @@ def test_transition_residual_jacobians(s, dt):
 
 def test_pose2_retract_and_body_jacobian_match_gtsam():
     import gtsam
-    from factors import pose2
+    from odomgraph.factors import pose2
     for _ in range(20):
         x, y, th = RNG.normal(0, 5), RNG.normal(0, 5), RNG.uniform(-np.pi, np.pi)
         d = RNG.normal(0, 0.3, 3)

@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 from typer.testing import CliRunner
 
-from odomgraph.analysis.faults import CASES, run_case
+from odomgraph.analysis.faults import CASES
+from odomgraph.runs import run_case
 from odomgraph.cli import app
 from odomgraph.io.log import read_log
 from odomgraph.sim.faults import Faults, Stall, inject

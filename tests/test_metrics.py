@@ -5,7 +5,7 @@ import pytest
 
 from odomgraph import state as S
 from odomgraph.analysis.metrics import truth_errors
-from odomgraph.estimators.result import Estimate
+from odomgraph.result import Estimate
 from odomgraph.io.log import Log, Truth
 from odomgraph.io.robot import RobotConfig
 

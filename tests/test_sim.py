@@ -3,8 +3,8 @@ scale factors and slip definition, a lever-armed GPS, unsynchronised rates."""
 import numpy as np
 import pytest
 
-from factors.encoder import wheel_speeds
-from factors.gps import antenna_position
+from odomgraph.factors.encoder import wheel_speeds
+from odomgraph.factors.gps import antenna_position
 from odomgraph.sim.scenarios import Rates, paper, yard
 from odomgraph.sim.simulate import simulate
 

@@ -30,16 +30,25 @@ def runs(log):
             "fixed-lag": run_fixed_lag(log, sch)}
 
 
+@pytest.fixture(scope="module")
+def segmented(log):
+    """isam2 handing over to a fresh ISAM2 every 30 s: 4 segments on the 120 s log."""
+    return run_isam2(log, Schedule(20.0), IncrementalOptions(segment=30.0))
+
+
 @pytest.mark.parametrize("method", ["batch", "isam2", "fixed-lag"])
 def test_smoother_accuracy_and_consistency(runs, log, method):
     err = truth_errors(runs[method], log)
     ekf = truth_errors(runs["ekf"], log)
-    assert err.rms_position_m < 0.02
+    # measured on seed 5: batch 0.0100 m, isam2 0.0101 m, fixed-lag 0.0106 m (EKF 0.023 m)
+    assert err.rms_position_m < 0.025
+    # measured 0.0144-0.0146 m/s on every method (EKF 0.039, 0.040 m/s)
     assert max(err.rms_slip_mps.values()) < 0.025
-    # the smoother beats the paper's filter on slip by a wide margin
-    assert max(err.rms_slip_mps.values()) < 0.7 * min(ekf.rms_slip_mps.values())
+    # the smoother beats the paper's filter on slip by a wide margin (measured ratio 0.37)
+    assert max(err.rms_slip_mps.values()) < 0.5 * min(ekf.rms_slip_mps.values())
+    # measured largest relative error 0.0011 (batch), 0.0014 (isam2), 0.0012 (fixed-lag)
     for k, true in zip(("left", "right", "track"), log.truth_scales):
-        assert abs(err.final_scale_error[k] / true) < 0.004
+        assert abs(err.final_scale_error[k] / true) < 0.0035
     for name in CONSISTENCY:
         assert err.coverage_3sigma[name] >= 0.95, (method, name, err.coverage_3sigma[name])
     est = runs[method]
@@ -53,16 +62,22 @@ def test_incremental_solvers_reach_the_batch_solution(runs):
     for m in ("isam2", "fixed-lag"):
         e = runs[m]
         np.testing.assert_allclose(e.t, b.t)
-        np.testing.assert_allclose(e.mean[-1, S.SCALE], b.mean[-1, S.SCALE], atol=1.5e-3)
-        assert np.sqrt(np.mean((e.mean[:, S.SLIP] - b.mean[:, S.SLIP]) ** 2)) < 0.01
+        # measured at most 3.2e-4 (isam2), 2.7e-4 (fixed-lag) apart
+        np.testing.assert_allclose(e.mean[-1, S.SCALE], b.mean[-1, S.SCALE], atol=8e-4)
+        # slip RMS apart: measured 0.0013 m/s (isam2), 0.0033 m/s (fixed-lag: its window ends)
+        bound = {"isam2": 0.0035, "fixed-lag": 0.008}[m]
+        assert np.sqrt(np.mean((e.mean[:, S.SLIP] - b.mean[:, S.SLIP]) ** 2)) < bound
 
 
 def test_isam2_online_is_no_worse_than_the_ekf(runs, log):
     online = truth_errors(replace(runs["isam2"].online, t_switch=runs["isam2"].t_switch), log)
     ekf = truth_errors(runs["ekf"], log)
+    # measured 0.033 m/s on both wheels (ratio to the EKF 0.85, 0.82) and 0.019 m (ratio 0.82)
     for w in ("left", "right"):
         assert online.rms_slip_mps[w] <= 1.05 * ekf.rms_slip_mps[w]
+        assert online.rms_slip_mps[w] < 0.08
     assert online.rms_position_m <= 1.1 * ekf.rms_position_m
+    assert online.rms_position_m < 0.045
     for name in ("x", "y", "slip_left", "slip_right"):
         assert online.coverage_3sigma[name] >= 0.95
 
@@ -80,7 +95,40 @@ def test_online_estimate_never_uses_future_data(log, runs):
     np.testing.assert_allclose(short.online.mean[:m], full.mean[:m], atol=1e-9)
     np.testing.assert_allclose(short.online.sigma[:m], full.sigma[:m], atol=1e-9)
     # ...while the smoothed estimate of the same times does change with later data
-    assert np.abs(short.mean[:m, S.SLIP] - runs["isam2"].mean[:m, S.SLIP]).max() > 1e-4
+    # (measured by up to 6.9e-4 m/s)
+    assert np.abs(short.mean[:m, S.SLIP] - runs["isam2"].mean[:m, S.SLIP]).max() > 2.5e-4
+
+
+def _rows_done_by(online, t_start, T):
+    """How many leading online rows were produced by T: row j describes interval j's
+    midpoint and was produced when interval j ended."""
+    done = online.t + (online.t - np.append(t_start, online.t[:-1])) <= T
+    return min(len(online.t) - 1, int(np.sum(done)))
+
+
+def test_online_estimate_never_uses_future_data_across_segment_hand_overs(log, runs, segmented):
+    """Segments of 30 s, log cut at 75 s: the cut run hands over twice (at 30 and
+    60 s) before it ends, and every online row available by the cut, on both
+    sides of both hand-overs, is the full run's to 1e-9. A hand-over seeded
+    with the marginal of a later keyframe, or a segment smoothed with data
+    beyond it, would change the rows around it."""
+    T = 75.0
+    opt = IncrementalOptions(segment=30.0)
+    short = run_isam2(log.truncated(T), Schedule(20.0), opt)
+    assert "3 segment(s)" in short.notes[0] and "4 segment(s)" in segmented.notes[0]
+    full = segmented.online
+    m = _rows_done_by(short.online, log.t_start, T)
+    assert m > 370 and short.online.t[m - 1] > short.online.t[0] + 65.0   # measured 374 rows, 74.6 s
+    # (measured equal to the last bit)
+    np.testing.assert_allclose(short.online.mean[:m], full.mean[:m], atol=1e-9)
+    np.testing.assert_allclose(short.online.sigma[:m], full.sigma[:m], atol=1e-9)
+    # the hand-overs are real: after the first one (keyframe 150, 30 s in) the
+    # online rows leave the one-ISAM2 run's (whose rows before the cut are those of
+    # the same run on the cut log: the test above). Measured: equal to the last bit up
+    # to row 149, apart by up to 3.7e-3 from row 150 on.
+    one = runs["isam2"].online
+    np.testing.assert_allclose(short.online.mean[:150], one.mean[:150], atol=1e-9)
+    assert np.abs(short.online.mean[150:m] - one.mean[150:m]).max() > 1e-4
 
 
 def test_batch_equals_the_straightforward_gtsam_solution():
@@ -113,8 +161,9 @@ def test_calibrate_until_none_estimates_scale_and_slip_together():
     est = run_batch(log, Schedule(None))
     err = truth_errors(est, log)
     for k, true in zip(("left", "right", "track"), log.truth_scales):
-        assert abs(err.final_scale_error[k] / true) < 0.005
-    assert max(err.rms_slip_mps.values()) < 0.03
+        assert abs(err.final_scale_error[k] / true) < 0.0015        # measured 0.00045, 0.00039, 0.00050
+    assert max(err.rms_slip_mps.values()) < 0.03                     # measured 0.0122, 0.0129 m/s
+    assert err.rms_position_m < 0.025                                # measured 0.0100 m
     assert err.coverage_3sigma["scale_left"] > 0.95 and err.coverage_3sigma["scale_right"] > 0.95
 
 
@@ -130,27 +179,33 @@ def test_smoothers_with_other_sensors(sensors):
         if sensors == "ranges_only":
             sc = sc.with_(slips=())  # without a yaw sensor a differential slip looks like a turn (README)
     log = simulate(sc, 3)
+    # measured on seed 3, batch / isam2 / fixed-lag: RMS position 0.0095 / 0.0096 / 0.0102 m
+    # (ranges_gyro), 0.0073 / 0.0074 / 0.0076 m (ranges_only), 0.0079 / 0.0079 / 0.0085 m
+    # (gps_only); slip 0.017 m/s with slips, 0.0003-0.0004 m/s without
+    pos, slip = {"ranges_gyro": (0.025, 0.04), "ranges_only": (0.02, 0.001), "gps_only": (0.02, 0.001)}[sensors]
     for run in (run_batch, run_isam2, run_fixed_lag):
         err = truth_errors(run(log, Schedule(20.0)), log)
-        assert err.rms_position_m < 0.05, (sensors, run.__name__)
+        assert err.rms_position_m < pos, (sensors, run.__name__, err.rms_position_m)
+        assert max(err.rms_slip_mps.values()) < slip, (sensors, run.__name__, err.rms_slip_mps)
         assert err.coverage_3sigma["x"] > 0.95 and err.coverage_3sigma["y"] > 0.95
 
 
-def test_segmented_isam2_keeps_the_online_estimate_and_the_smoothed_solution(log, runs):
+def test_segmented_isam2_keeps_the_online_estimate_and_the_smoothed_solution(log, runs, segmented):
     """Handing over to a fresh ISAM2 every 30 s (instead of one for the whole
     log) changes nothing causal, and the backward pass recovers the smoothed
     solution to well within its uncertainty."""
-    seg = run_isam2(log, Schedule(20.0), IncrementalOptions(segment=30.0))
+    seg = segmented
     one = runs["isam2"]
     assert "4 segment(s)" in seg.notes[0] and "1 segment(s)" in one.notes[0]
     np.testing.assert_allclose(seg.online.mean[:140], one.online.mean[:140], atol=1e-9)  # before the first handoff
-    # after it, the handoff prior is a linearisation: agreement within a small fraction of sigma
+    # after it, the handoff prior is a linearisation: agreement within a small fraction
+    # of sigma (99th percentile measured 0.054 sigma online, 0.056 smoothed)
     z = np.abs(seg.online.mean - one.online.mean) / np.maximum(one.online.sigma, 1e-9)
-    assert np.percentile(z[:, [S.X, S.Y, S.SLIP_L, S.SLIP_R]], 99) < 0.5
+    assert np.percentile(z[:, [S.X, S.Y, S.SLIP_L, S.SLIP_R]], 99) < 0.15
     z = np.abs(seg.mean - one.mean) / np.maximum(one.sigma, 1e-9)
-    assert np.percentile(z[:, [S.X, S.Y, S.SLIP_L, S.SLIP_R, S.SCALE_L, S.SCALE_R, S.SCALE_B]], 99) < 1.0
+    assert np.percentile(z[:, [S.X, S.Y, S.SLIP_L, S.SLIP_R, S.SCALE_L, S.SCALE_R, S.SCALE_B]], 99) < 0.15
     err = truth_errors(seg, log)
-    assert max(err.rms_slip_mps.values()) < 0.025
+    assert max(err.rms_slip_mps.values()) < 0.025                  # measured 0.0142, 0.0144 m/s
     for name in CONSISTENCY:
         assert err.coverage_3sigma[name] >= 0.95
 
@@ -163,13 +218,13 @@ def test_robust_gps_survives_gross_outliers(log):
     bad = log.with_(gps=Gps(g.t, x, g.y))
     plain = truth_errors(run_batch(bad, Schedule(20.0), SmootherOptions(robust="none")), bad)
     clean = truth_errors(run_batch(log, Schedule(20.0)), log)
-    assert plain.rms_position_m > 3 * clean.rms_position_m
+    assert plain.rms_position_m > 8 * clean.rms_position_m           # measured 16.6x (clean 0.0100 m)
     # the default loss (Cauchy at 5 sigma), and the textbook 95 %-efficiency Cauchy
     for opt in (SmootherOptions(), SmootherOptions(robust="cauchy", robust_k=2.385)):
         est = run_batch(bad, Schedule(20.0), opt)
         robust = truth_errors(est, bad)
-        assert robust.rms_position_m < 1.3 * clean.rms_position_m
-        assert max(robust.rms_slip_mps.values()) < 0.03
+        assert robust.rms_position_m < 1.1 * clean.rms_position_m    # measured 0.99x and 1.01x
+        assert max(robust.rms_slip_mps.values()) < 0.03               # measured 0.0146, 0.0148 m/s
         assert est.rejected["gps"] == np.sum(g.t[::50] >= est.t[0] - 0.1)      # every outlier in the graph, nothing else
 
 
@@ -185,13 +240,13 @@ def test_keyframe_fixes_use_the_wheel_travel_inside_the_interval():
     log = simulate(sc, 0)
     est = run_batch(log, Schedule(20.0))
     err = est.mean[-1, 8:11] / np.array(sc.scales) - 1
-    assert np.all(np.abs(err) < 1e-4), err
+    assert np.all(np.abs(err) < 1e-4), err          # measured 3e-6, 2.7e-5, 6.0e-5
     kf = build_problem(log, Schedule(20.0), SmootherOptions()).kf
     g = log.gps.t[(log.gps.t >= kf.t[0]) & (log.gps.t < kf.t[-1])]   # the fixes the keyframes hold, in order
     tvw, tau = kf.gps_tau_vw, g - kf.t[kf.gps_k]                    # effective and plain time after t_k
     assert np.all((tvw >= 0) & (tvw <= kf.dt[kf.gps_k][:, None] + 1e-12))
     accel = np.abs(tvw[:, 0] - tau) > 0.01          # fixes inside intervals where the speed changes
-    assert 0.02 < accel.mean() < 0.5
+    assert 0.015 < accel.mean() < 0.075             # measured 0.030
 
 
 def test_fixed_lag_recovers_on_far_off_nominal_parameters():
@@ -224,9 +279,11 @@ def test_wheel_speed_units_shrink_the_poor_gps_scale_bias():
         units = run_batch(log, sch, SmootherOptions(), initial=ekf).mean[-1, S.SCALE] / sc.scales - 1
         plain = run_batch(log, sch, SmootherOptions(wheel_speed_units=False), initial=ekf).mean[-1, S.SCALE] \
             / sc.scales - 1
+        # measured on seeds 0-2: plain ticks/m +0.016 .. +0.027, track -0.019 .. -0.028;
+        # wheel-speed units take 0.0083-0.0086 off ticks/m and 0.0086-0.0087 off track
         assert np.all(plain[:2] > 0.01)                               # the bias is there...
-        assert np.all(units[:2] < plain[:2] - 0.003)                  # ...and smaller, ticks/m
-        assert units[2] > plain[2] + 0.003                            # and track
+        assert np.all((plain[:2] - units[:2] > 0.006) & (plain[:2] - units[:2] < 0.011))   # ...and smaller, ticks/m
+        assert 0.006 < units[2] - plain[2] < 0.011                    # and track
     log = simulate(paper(40), 1)
     a = run_batch(log, Schedule(0.0), SmootherOptions())
     b = run_batch(log, Schedule(0.0), SmootherOptions(wheel_speed_units=False))

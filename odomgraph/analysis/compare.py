@@ -8,13 +8,12 @@ HTML are ``analysis.report``'s job.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 import numpy as np
 
 from odomgraph.analysis.metrics import gps_deviation, range_residuals, truth_errors
-from odomgraph.errors import EstimatorDivergedError, OdomgraphError
-from odomgraph.estimators.result import Estimate
+from odomgraph.result import Estimate
 from odomgraph.estimators.schedule import Schedule
 from odomgraph.io.log import Log
 
@@ -34,58 +33,6 @@ class Comparison:
     """The EKF without slip states: the paper's fig. 7 baseline (None if it diverged)."""
     metrics: dict
     """metrics.json content (see ``comparison_metrics``)."""
-
-
-def run_comparison(log: Log, schedule: Schedule, progress_for=None, **options) -> Comparison:
-    """Run every estimator of ESTIMATORS (and the no-slip EKF) on ``log``.
-
-    ``progress_for(label)`` may return a progress(done, total) callback for
-    each run. ``options`` are passed to every estimator (see pipeline.estimate),
-    except ``range_bias``, which only the batch smoother estimates.
-    """
-    from odomgraph.io.log import rebased
-    log = rebased(log)  # Log.t_origin
-    from odomgraph.estimators.ekf import EKFOptions, run_ekf
-    from odomgraph.pipeline import Method, estimate
-    if schedule.calibrate_until is None:
-        raise OdomgraphError("compare runs the EKF, which needs a schedule: use --calibrate-until SECONDS "
-                             "(0 = slip only), not 'none'")
-    prog = progress_for or (lambda label: None)
-    ests: dict[str, Estimate] = {}
-    failed: dict[str, str] = {}
-
-    def attempt(label, run):
-        # A diverged estimator is a result of the comparison, not the end of it.
-        try:
-            return run()
-        except EstimatorDivergedError as exc:
-            failed[label] = str(exc)
-            return None
-
-    for label, method in (("ekf", Method.ekf), ("isam2", Method.isam2), ("batch", Method.batch)):
-        opts = options if method is Method.batch else {k: v for k, v in options.items() if k != "range_bias"}
-        est = attempt(label, lambda: estimate(log, method, schedule, prog(label), **opts))
-        if est is None:
-            if label == "isam2":
-                failed["isam2-online"] = failed["isam2"]
-            continue
-        if label == "isam2":
-            ests["isam2-online"] = replace(est.online, method="isam2-online", t_switch=est.t_switch,
-                                           wall_time_s=est.wall_time_s, n_updates=est.n_updates)
-        ests[label] = est
-    if not ests:
-        raise EstimatorDivergedError("every estimator diverged on this log: " + "; ".join(failed.values()))
-    gate = options.get("gate")
-    # Without slip states the filter is expected to disagree with its encoders
-    # during slip (that is what fig. 7 shows), so its NIS watch is off.
-    no_slip = attempt("ekf-no-slip", lambda: run_ekf(
-        log, schedule, EKFOptions(gate=gate, slip_states=False, max_mean_nis=np.inf), prog("ekf without slip")))
-    metrics = comparison_metrics(ests, log, schedule, no_slip)
-    for label, msg in failed.items():
-        metrics["estimators"][label] = {"failed": msg}
-    order = [*ESTIMATORS, "ekf-no-slip"]
-    metrics["estimators"] = {k: metrics["estimators"][k] for k in order if k in metrics["estimators"]}
-    return Comparison(log, schedule, ests, no_slip, metrics)
 
 
 def _rms(x: np.ndarray) -> float | None:

@@ -8,8 +8,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from factors.encoder import body_velocity
-from factors.motion import propagate
+from odomgraph.factors.encoder import body_velocity
+from odomgraph.factors.motion import propagate
 from odomgraph.io.log import Log
 
 

@@ -11,7 +11,6 @@ asserts the acceptance numbers on short logs.
 """
 from __future__ import annotations
 
-import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -67,7 +66,7 @@ def scenario(case: Case, duration: float):
     return paper(max(duration, case.min_duration)).with_(slips=(), rates=Rates(**rates))
 
 
-def _written(log, d: Path):
+def written(log, d: Path):
     """The log as a user would have it: written and read back."""
     from odomgraph.io.log import read_log, write_log
     write_log(log, d)
@@ -87,7 +86,7 @@ def _window_rms(err, name_x: str, name_y: str | None, t0: float, t1: float) -> f
 def score(est, log, clean_rms: float | None, case: Case) -> dict:
     """The numbers of one faulty run (see run_case)."""
     from odomgraph.analysis.metrics import truth_errors
-    from odomgraph.pipeline import status_of
+    from odomgraph.result import status_of
     err = truth_errors(est, log)
     t0 = 0.0                       # fault times are on the scenario's clock
     out = {
@@ -127,27 +126,3 @@ def score(est, log, clean_rms: float | None, case: Case) -> dict:
     return out
 
 
-def run_case(case: Case | str, method: str, seed: int = 0, duration: float = 90.0) -> dict:
-    """Simulate ``case`` and its clean twin with ``seed``, run ``method`` on
-    both (through written files), and score the faulty run. A run that stops
-    is reported with ``finished: False`` and its one-line reason."""
-    from odomgraph.analysis.metrics import truth_errors
-    from odomgraph.errors import OdomgraphError
-    from odomgraph.estimators.schedule import Schedule
-    from odomgraph.pipeline import estimate
-    from odomgraph.sim.faults import inject
-    case = CASES[case] if isinstance(case, str) else case
-    sc = scenario(case, duration)
-    with tempfile.TemporaryDirectory() as tmp:
-        bad = _written(inject(sc, case.faults, seed), Path(tmp) / "faulty")
-        clean = _written(inject(sc, Faults(), seed), Path(tmp) / "clean")
-    sch = Schedule(20.0)
-    try:
-        clean_rms = truth_errors(estimate(clean, method, sch), clean).rms_position_m
-    except OdomgraphError:
-        clean_rms = None
-    try:
-        est = estimate(bad, method, sch)
-    except OdomgraphError as exc:
-        return {"case": case.name, "method": method, "seed": seed, "finished": False, "reason": str(exc)}
-    return {"case": case.name, "method": method, "seed": seed, **score(est, bad, clean_rms, case)}

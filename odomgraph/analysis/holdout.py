@@ -143,7 +143,7 @@ def score_gyro(log, scales, t0: float, t1: float, skip=()) -> tuple[float, int] 
 def wheel_yaw_rate_at_gyro(log, scales=(1.0, 1.0, 1.0)):
     """(gyro times, gyro rate, the wheels' yaw rate there) [s, rad/s, rad/s],
     within the span the wheels cover; None without a gyro or wheels."""
-    from factors.encoder import body_velocity
+    from odomgraph.factors.encoder import body_velocity
     from odomgraph.estimators.measurements import from_log
     if log.gyro is None or len(log.gyro.t) < 2:
         return None

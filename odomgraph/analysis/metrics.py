@@ -8,9 +8,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from factors._math import wrap_angle
+from odomgraph.factors._math import wrap_angle
 from odomgraph import state as S
-from odomgraph.estimators.result import Estimate
+from odomgraph.result import Estimate
 from odomgraph.io.log import Log
 
 #: States compared with truth.csv columns of the same name.
@@ -125,7 +125,7 @@ def gps_residuals(est: Estimate, log: Log) -> tuple[np.ndarray, np.ndarray, np.n
     """Measured minus predicted antenna position (pose + lever arm, paper eq.
     8) for the fixes inside the estimate's span: (t (M,) [s], residual (M, 2)
     east/north [m], each fix's sigma (M,) [m]); None when the log has no GPS."""
-    from factors.gps import antenna_position
+    from odomgraph.factors.gps import antenna_position
     g = log.gps
     if g is None or len(g.t) == 0:
         return None
@@ -141,7 +141,7 @@ def range_residuals(est: Estimate, log: Log) -> tuple[np.ndarray, np.ndarray] | 
     """Measured minus predicted range (paper eq. 12) at each range time inside the
     estimate's span: (t (M,) [s], residual (M,) [m]); None without ranges.
     An estimator that estimated per-beacon range biases is judged with them."""
-    from factors.ranging import beacon_range
+    from odomgraph.factors.ranging import beacon_range
     r = log.ranges
     if r is None or len(r.t) == 0 or not log.robot.beacons:
         return None

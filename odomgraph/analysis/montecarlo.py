@@ -156,13 +156,13 @@ def run_point(p: PointSpec) -> PointResult:
 
 
 # ---------------------------------------------------------------- the sweep
-def _write_atomic(path, text: str) -> None:
+def write_atomic(path, text: str) -> None:
     tmp = path.with_name(f".{path.name}.tmp-{os.getpid()}")
     tmp.write_text(text, encoding="utf-8")
     os.replace(tmp, path)
 
 
-def _spec_json(spec: StudySpec) -> dict:
+def spec_json(spec: StudySpec) -> dict:
     return asdict(spec) | {"x_values": list(spec.x_values), "y_values": list(spec.y_values)}
 
 
@@ -182,15 +182,15 @@ def open_study_dir(directory, spec: StudySpec):
                 old = json.loads(spec_file.read_text())
             except (OSError, json.JSONDecodeError) as exc:
                 raise OdomgraphError(f"{spec_file}: unreadable ({exc}); remove it or choose another -o") from None
-            if old != _spec_json(spec):
-                diff = sorted(k for k in old if old.get(k) != _spec_json(spec).get(k))
+            if old != spec_json(spec):
+                diff = sorted(k for k in old if old.get(k) != spec_json(spec).get(k))
                 raise OdomgraphError(f"{d}: holds a different study (differs in {', '.join(diff)}); "
                                      "choose another -o or repeat the original options to resume")
         elif any(d.iterdir()):
             raise OdomgraphError(f"{d}: exists, is not empty and was not written by odomgraph montecarlo")
     (d / "points").mkdir(parents=True, exist_ok=True)
     if not spec_file.exists():
-        _write_atomic(spec_file, json.dumps(_spec_json(spec), indent=2) + "\n")
+        write_atomic(spec_file, json.dumps(spec_json(spec), indent=2) + "\n")
     return d / "points"
 
 
@@ -222,7 +222,7 @@ def run_study(spec: StudySpec, directory, workers: int | None = None, scheduler:
     total = len(spec.points())
 
     def finished(p: PointSpec, r: PointResult):
-        _write_atomic(points_dir / f"{p.key}.json", json.dumps(asdict(r)) + "\n")
+        write_atomic(points_dir / f"{p.key}.json", json.dumps(asdict(r)) + "\n")
         done[p.key] = r
         if progress is not None:
             progress(len(done), total)
@@ -331,20 +331,3 @@ def grid_of(spec: StudySpec, results: list[PointResult], estimator: str, quantit
             v = r.medians(estimator)[quantity]
             g[r.i, r.j] = np.nan if v is None else v
     return g
-
-
-def write_outputs(spec: StudySpec, results: list[PointResult], directory) -> list:
-    """results.csv, results.json, heatmaps and summary.html into DIR (each file atomically)."""
-    from pathlib import Path
-    from odomgraph.analysis.montecarlo_report import heatmap_figure, summary_html
-    d = Path(directory)
-    rows = results_table(spec, results)
-    cols = list(rows[0])
-    lines = [",".join(cols)] + [",".join("" if row[c] is None else (f"{row[c]:.6g}" if isinstance(row[c], float)
-                                                                   else str(row[c])) for c in cols) for row in rows]
-    _write_atomic(d / "results.csv", "\n".join(lines) + "\n")
-    _write_atomic(d / "results.json", json.dumps({"study": _spec_json(spec), "rows": rows,
-                                                  "points": [asdict(r) for r in results]}, indent=1) + "\n")
-    figs = [heatmap_figure(spec, results, d)]
-    _write_atomic(d / "summary.html", summary_html(spec, results, d, figs))
-    return [d / "results.csv", d / "results.json", *figs, d / "summary.html"]

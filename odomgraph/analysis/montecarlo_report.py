@@ -2,11 +2,13 @@
 from __future__ import annotations
 
 import html
+import json
+from dataclasses import asdict
 from pathlib import Path
 
 import numpy as np
 
-from odomgraph.analysis.montecarlo import PointResult, StudySpec, grid_of
+from odomgraph.analysis.montecarlo import PointResult, StudySpec, grid_of, results_table, spec_json, write_atomic
 
 #: Heatmap rows: (label, quantities averaged, factor to display units, unit).
 _ROWS = (("left ticks/m scale", ("scale_left",), 100.0, "%"),
@@ -129,7 +131,6 @@ def findings(spec: StudySpec, results: list[PointResult], estimator: str = "ekf"
 
 
 def summary_html(spec: StudySpec, results: list[PointResult], directory, figures: list[Path]) -> str:
-    from odomgraph.analysis.montecarlo import results_table
     from odomgraph.analysis.report import embed_png
     from odomgraph.sim.sensor_configs import CONFIGS
     cfg = CONFIGS[spec.config]
@@ -163,3 +164,18 @@ def summary_html(spec: StudySpec, results: list[PointResult], directory, figures
     parts.append("</table><p>CPU time in the workers: " + ", ".join(f"{k} {v:.0f} s" for k, v in wall.items())
                  + ".</p></body></html>\n")
     return "".join(parts)
+
+
+def write_outputs(spec: StudySpec, results: list[PointResult], directory) -> list:
+    """results.csv, results.json, heatmaps and summary.html into DIR (each file atomically)."""
+    d = Path(directory)
+    rows = results_table(spec, results)
+    cols = list(rows[0])
+    lines = [",".join(cols)] + [",".join("" if row[c] is None else (f"{row[c]:.6g}" if isinstance(row[c], float)
+                                                                   else str(row[c])) for c in cols) for row in rows]
+    write_atomic(d / "results.csv", "\n".join(lines) + "\n")
+    write_atomic(d / "results.json", json.dumps({"study": spec_json(spec), "rows": rows,
+                                                  "points": [asdict(r) for r in results]}, indent=1) + "\n")
+    figs = [heatmap_figure(spec, results, d)]
+    write_atomic(d / "summary.html", summary_html(spec, results, d, figs))
+    return [d / "results.csv", d / "results.json", *figs, d / "summary.html"]

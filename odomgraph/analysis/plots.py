@@ -12,7 +12,7 @@ import numpy as np
 
 from odomgraph import state as S
 from odomgraph.analysis.metrics import gps_deviation, nees_series
-from odomgraph.estimators.result import Estimate
+from odomgraph.result import Estimate
 from odomgraph.io.log import Log
 
 #: One colour per estimator label, the same in every figure.

@@ -6,14 +6,11 @@ and store them), so both report the same thing.
 """
 from __future__ import annotations
 
-import os
-from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass
 
 import numpy as np
 
 from odomgraph.analysis.metrics import truth_errors
-from odomgraph.estimators.schedule import Schedule
 
 
 @dataclass(frozen=True)
@@ -53,38 +50,13 @@ class StudySummary:
     rms_position: float = 0.0
     """RMS over seeds of each seed's RMS position error [m]."""
 
-def _score(est, log, seed) -> SeedResult:
+def score_seed(est, log, seed) -> SeedResult:
     err = truth_errors(est, log)
     post = err.slip_mask
     sq = tuple(float(np.sum(err.error_series[f"slip_{w}"][post] ** 2)) for w in ("left", "right"))
     rel = tuple(abs(err.final_scale_error[k] / t) for k, t in zip(("left", "right", "track"), log.truth_scales))
     return SeedResult(seed, rel, sq, int(post.sum()), err.coverage_3sigma, est.n_updates, est.wall_time_s,
                       err.rms_position_m)
-
-
-def _one(args) -> SeedResult:
-    scenario, seed, schedule, method = args
-    from dataclasses import replace
-    from odomgraph.pipeline import Method, estimate
-    from odomgraph.sim.simulate import simulate
-    log = simulate(scenario, seed)
-    est = estimate(log, Method(method), schedule)
-    res = _score(est, log, seed)
-    if est.online is not None:
-        res = replace(res, online=_score(replace(est.online, t_switch=est.t_switch), log, seed))
-    return res
-
-
-def run_study(scenario, seeds, schedule: Schedule | None = None, method: str = "ekf",
-              workers: int | None = None) -> list[SeedResult]:
-    """Simulate and estimate each seed (in a process pool); results in seed order."""
-    schedule = schedule or Schedule(calibrate_until=scenario.calibrate_until)
-    jobs = [(scenario, s, schedule, method) for s in seeds]
-    workers = workers or min(len(jobs), os.cpu_count() or 1)
-    if workers <= 1:
-        return [_one(j) for j in jobs]
-    with ProcessPoolExecutor(workers) as pool:
-        return list(pool.map(_one, jobs))
 
 
 def summarize(results: list[SeedResult]) -> StudySummary:

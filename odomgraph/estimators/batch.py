@@ -20,9 +20,9 @@ from dataclasses import dataclass
 import gtsam
 import numpy as np
 
-from factors import pose2
-from factors._math import wrap_angle
-from factors.motion import propagate
+from odomgraph.factors import pose2
+from odomgraph.factors._math import wrap_angle
+from odomgraph.factors.motion import propagate
 from odomgraph import state as S
 from odomgraph.checks import bounded, check_fields
 from odomgraph.errors import EstimatorDivergedError
@@ -30,9 +30,9 @@ from odomgraph.estimators.graph import NB, Linearization, Problem, linearize, ro
 from odomgraph.estimators.initial import initial_state
 from odomgraph.estimators.keyframes import build_keyframes
 from odomgraph.estimators.measurements import clean, from_log, slip_intensity
-from odomgraph.estimators.observability import decondition
+from odomgraph.observability import decondition
 from odomgraph.estimators.slipcheck import in_stretches, in_window
-from odomgraph.estimators.result import Estimate
+from odomgraph.result import Estimate
 from odomgraph.estimators.schedule import Schedule
 from odomgraph.io.log import Log
 
@@ -147,7 +147,7 @@ def robust_initial_guess(prob: Problem, meas) -> tuple[np.ndarray, np.ndarray]:
     with too few fixes keeps the previous piece's map (an outage), and a log
     without fixes is plain dead reckoning.
     """
-    from factors.motion import integrate
+    from odomgraph.factors.motion import integrate
     from odomgraph.estimators.initial import _range_fixes, rigid_fit, rigid_ransac
     kf, r = prob.kf, prob.robot
     v = kf.enc_m.mean(1)
@@ -213,7 +213,7 @@ def growing_window_guess(prob: Problem, meas) -> tuple[np.ndarray, np.ndarray]:
     wrong minimum (ESTIMATION-NOTES.md: started from dead reckoning with wrong
     scale factors, a whole-log solve converged to scale factors x5).
     """
-    from factors.encoder import body_velocity
+    from odomgraph.factors.encoder import body_velocity
     pose, W = robust_initial_guess(prob, meas)
     kf, r = prob.kf, prob.robot
     L = np.diag(1.0 / _GROW_SIGMA)
@@ -225,7 +225,7 @@ def growing_window_guess(prob: Problem, meas) -> tuple[np.ndarray, np.ndarray]:
             w = W[done]
             v, om = body_velocity(kf.enc_m[done:k1, 0], kf.enc_m[done:k1, 1], w[3], w[4], w[5], w[6], w[7],
                                   r.track_width)
-            from factors.motion import integrate
+            from odomgraph.factors.motion import integrate
             pose[done:k1 + 1] = integrate(v, om, kf.dt[done:k1], start=tuple(pose[done]))
             pose[done:k1 + 1, 2] = wrap_angle(pose[done:k1 + 1, 2])
             W[done + 1:k1 + 1] = w

@@ -25,17 +25,17 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from factors import encoder, gps, gyro, pseudo, ranging, velocity
-from factors._math import wrap_angle
-from factors.motion import propagate
+from odomgraph.factors import encoder, gps, gyro, pseudo, ranging, velocity
+from odomgraph.factors._math import wrap_angle
+from odomgraph.factors.motion import propagate
 from odomgraph import state as S
 from odomgraph.checks import bounded, check_fields
 from odomgraph.errors import EstimatorDivergedError
 from odomgraph.estimators.initial import InitialState, initial_state
 from odomgraph.estimators.measurements import Measurements, from_log, slip_intensity
-from odomgraph.estimators.observability import decondition
+from odomgraph.observability import decondition
 from odomgraph.estimators.slipcheck import in_stretches, in_window
-from odomgraph.estimators.result import Estimate, Innovations
+from odomgraph.result import Estimate, Innovations
 from odomgraph.estimators.schedule import Hold, Schedule
 from odomgraph.io.log import Log
 

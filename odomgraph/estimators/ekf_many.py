@@ -17,9 +17,9 @@ import time
 
 import numpy as np
 
-from factors import encoder, gps, gyro, pseudo, ranging, velocity
-from factors._math import wrap_angle
-from factors.motion import propagate
+from odomgraph.factors import encoder, gps, gyro, pseudo, ranging, velocity
+from odomgraph.factors._math import wrap_angle
+from odomgraph.factors.motion import propagate
 from odomgraph import state as S
 from odomgraph.errors import EstimatorDivergedError
 from odomgraph.estimators.ekf import (_DOF, _ENC_IDX, _GYRO_IDX, _POSE_IDX, _SCALE_IDX, _SLIP_IDX, _VEL_IDX, GATE_HISTORY,
@@ -29,9 +29,9 @@ from odomgraph.estimators.ekf import (_DOF, _ENC_IDX, _GYRO_IDX, _POSE_IDX, _SCA
                                       watch_widening)
 from odomgraph.estimators.initial import initial_state
 from odomgraph.estimators.measurements import from_log, slip_intensity
-from odomgraph.estimators.observability import decondition
+from odomgraph.observability import decondition
 from odomgraph.estimators.slipcheck import in_stretches, in_window
-from odomgraph.estimators.result import Estimate
+from odomgraph.result import Estimate
 from odomgraph.estimators.schedule import Hold, Schedule
 from odomgraph.io.log import Log
 

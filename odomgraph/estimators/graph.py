@@ -28,8 +28,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from factors import encoder, gps as gps_model, gyro, pose2, ranging
-from factors.motion import arc_at, transition_residual
+from odomgraph.factors import encoder, gps as gps_model, gyro, pose2, ranging
+from odomgraph.factors.motion import arc_at, transition_residual
 from odomgraph.estimators.initial import InitialState
 from odomgraph.estimators.keyframes import Keyframes
 from odomgraph.io.robot import RobotConfig

@@ -30,10 +30,10 @@ from gtsam.symbol_shorthand import S as S_KEY
 from gtsam.symbol_shorthand import W as W_KEY
 from gtsam.symbol_shorthand import X as X_KEY
 
-from factors import gps as gps_model
-from factors import pose2, ranging
-from factors._math import wrap_angle
-from factors.motion import arc_at, propagate
+from odomgraph.factors import gps as gps_model
+from odomgraph.factors import pose2, ranging
+from odomgraph.factors._math import wrap_angle
+from odomgraph.factors.motion import arc_at, propagate
 from odomgraph import state as St
 from odomgraph.checks import bounded
 from odomgraph.errors import EstimatorDivergedError
@@ -42,7 +42,7 @@ from odomgraph.estimators.batch import (SmootherOptions, _factor_arrays, _n_meas
                                         solve_window, window_warnings)
 from odomgraph.estimators.graph import NB, Problem, linearize, robust_counts
 from odomgraph.estimators.measurements import from_log
-from odomgraph.estimators.result import Estimate
+from odomgraph.result import Estimate
 from odomgraph.estimators.schedule import Schedule
 from odomgraph.io.log import Log
 

@@ -16,13 +16,13 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from factors import encoder
-from factors._math import wrap_angle
-from factors.motion import integrate
+from odomgraph.factors import encoder
+from odomgraph.factors._math import wrap_angle
+from odomgraph.factors.motion import integrate
 from odomgraph import state as S
 from odomgraph.errors import NotEnoughDataError
 from odomgraph.estimators.measurements import Measurements
-from odomgraph.estimators.observability import Observability, prior_scale_cov, structure
+from odomgraph.observability import Observability, prior_scale_cov, structure
 from odomgraph.estimators.slipcheck import slipping_stretches
 from odomgraph.io.robot import RobotConfig
 

@@ -22,7 +22,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from factors.encoder import speed_sigma
+from odomgraph.factors.encoder import speed_sigma
 from odomgraph.io.log import Log
 
 W_NAMES = ("v", "omega", "gyro_bias", "slip_left", "slip_right", "scale_left", "scale_right", "scale_track")

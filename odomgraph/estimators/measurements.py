@@ -11,7 +11,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from factors.encoder import speed_sigma
+from odomgraph.factors.encoder import speed_sigma
 from odomgraph.io.log import Log
 
 #: An encoder interval longer than this many median intervals spans a dropout;
@@ -230,8 +230,8 @@ def dead_reckoning(meas: Measurements, track: float, scales=(1.0, 1.0, 1.0)) -> 
     the midpoints instead would lag the path by half an interval, which a
     time-offset check then reads as a 25 ms late GPS at 20 Hz). Wheel speeds
     already in m/s stand for their instant, each held to the next."""
-    from factors.encoder import body_velocity
-    from factors.motion import integrate
+    from odomgraph.factors.encoder import body_velocity
+    from odomgraph.factors.motion import integrate
     w = meas.wheel
     v, om = body_velocity(w.m[:, 0], w.m[:, 1], 0.0, 0.0, *scales, track)
     if w.dt is not None:

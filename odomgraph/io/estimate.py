@@ -8,7 +8,7 @@ import numpy as np
 
 from odomgraph import state as S
 from odomgraph.errors import LogFormatError
-from odomgraph.estimators.result import Estimate
+from odomgraph.result import Estimate
 from odomgraph.io.csvtable import read_table, stamp_text, write_table
 from odomgraph.io.outdir import atomic_output_dir
 

@@ -85,7 +85,7 @@ class Truth:
             return None
         if name == "theta":
             th = np.unwrap(self.values["theta"])
-            from factors._math import wrap_angle
+            from odomgraph.factors._math import wrap_angle
             return wrap_angle(np.interp(t, self.t, th))
         return np.interp(t, self.t, self.values[name])
 

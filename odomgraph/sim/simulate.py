@@ -9,9 +9,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from factors import gps as gps_model
-from factors import ranging
-from factors._math import wrap_angle
+from odomgraph.factors import gps as gps_model
+from odomgraph.factors import ranging
+from odomgraph.factors._math import wrap_angle
 from odomgraph.io.log import Encoders, Gps, Gyro, Log, Ranges, Truth, Velocity
 from odomgraph.io.robot import InitialPose
 from odomgraph.sim.scenarios import Scenario
@@ -88,7 +88,7 @@ def simulate(sc: Scenario, seed: int = 0, timing_seed: int | None = None) -> Log
     # theta_k from the running sum, then each step's chord in one call.
     x0, y0, th0 = sc.start_pose
     th = th0 + np.concatenate([[0.0], np.cumsum(w[:-1] * dt)])
-    from factors.motion import propagate
+    from odomgraph.factors.motion import propagate
     step, _ = propagate(0.0, 0.0, th[:-1], v[:-1], w[:-1], dt)
     x = x0 + np.concatenate([[0.0], np.cumsum(step[:, 0])])
     y = y0 + np.concatenate([[0.0], np.cumsum(step[:, 1])])

@@ -20,7 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
-from factors._math import wrap_angle
+from odomgraph.factors._math import wrap_angle
 from odomgraph.errors import LogFormatError
 from odomgraph.io.csvtable import read_text, shown, text_lines
 from odomgraph.io.log import Encoders, Gps, Log, Truth

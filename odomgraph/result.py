@@ -6,7 +6,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from odomgraph import state
-from odomgraph.estimators.observability import Observability
+from odomgraph.observability import Observability
 
 
 @dataclass
@@ -95,7 +95,7 @@ class Estimate:
         """Scale combinations the log does not determine, with the reason:
         those pinned by the structure and those the data barely inform
         (estimators.observability)."""
-        from odomgraph.estimators.observability import weakly_determined
+        from odomgraph.observability import weakly_determined
         obs = self.observability
         if obs is None:
             return {}
@@ -109,7 +109,7 @@ class Estimate:
         """Final scale factors: value, honest 1-sigma, and whether the log
         determines it (a scale factor touched by an unobservable combination
         is not)."""
-        from odomgraph.estimators.observability import AFFECTS, WEAK_RATIO
+        from odomgraph.observability import AFFECTS, WEAK_RATIO
         undetermined = {p for name in self.unobservable() for p in AFFECTS[name]}
         sig = np.sqrt(np.maximum(np.diagonal(self.scale_cov()), 0.0))
         prior = self.observability.prior_sigma if self.observability is not None else None
@@ -119,3 +119,30 @@ class Estimate:
         return {name: {"value": float(self.mean[-1, i]), "sigma": float(s),
                        "observable": bool(name not in undetermined and (prior is None or s <= WEAK_RATIO * prior))}
                 for name, i, s in zip(("scale_left", "scale_right", "scale_track"), state.SCALE, sig)}
+
+
+#: A sensor losing more than this share of its measurements to the gate or the
+#: robust loss makes the run "degraded".
+DEGRADED_REJECTED = 0.2
+
+
+def status_of(est: Estimate) -> tuple[str, list[str]]:
+    """("ok" | "recovered" | "degraded", the reasons): recovered when the
+    estimator caught itself diverging and recovered; degraded when a flag
+    says the result is suspect (Estimate.flags), it hit an iteration cap,
+    recovered many times, or lost more than DEGRADED_REJECTED of a sensor's
+    measurements."""
+    why = list(est.flags)
+    for s, n in est.rejected.items():
+        used = est.used.get(s)
+        if used and n / used > DEGRADED_REJECTED:
+            why.append(f"{s}: {n} of {used} measurements rejected")
+    if any("iteration cap" in w for w in est.warnings):
+        why.append("an iteration cap was hit")
+    if len(est.recoveries) > 5:
+        why.append(f"{len(est.recoveries)} recoveries")
+    if why:
+        return "degraded", why
+    if est.recoveries:
+        return "recovered", [f"{len(est.recoveries)} recovery(ies)"]
+    return "ok", []

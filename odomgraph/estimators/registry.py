@@ -1,0 +1,102 @@
+"""The one table of estimators: each method's name, options type and run function.
+
+``pipeline.estimate``, the comparison, the Monte-Carlo study and the CLI all
+dispatch through it. A method is a ``Method`` or its name; options are the
+fields of the method's options dataclass, and a name that no estimator takes
+is an OptionError that lists the valid ones.
+
+    run(log, "batch", Schedule(20.0), None, {"keyframe_hz": 2.0})
+"""
+from __future__ import annotations
+
+import importlib
+from dataclasses import dataclass
+from enum import Enum
+
+
+class Method(str, Enum):
+    ekf = "ekf"
+    """The paper's velocity-augmented EKF."""
+    batch = "batch"
+    """Factor-graph smoother, Gauss-Newton over the whole log (GTSAM elimination)."""
+    isam2 = "isam2"
+    """Factor-graph smoother, one gtsam.ISAM2 update per keyframe."""
+    fixed_lag = "fixed-lag"
+    """Factor-graph smoother, gtsam.IncrementalFixedLagSmoother."""
+
+
+@dataclass(frozen=True)
+class Entry:
+    """Where a method lives: ``module``'s ``options`` dataclass and ``run``
+    function ``run(log, schedule, options, progress) -> Estimate``. Imported
+    on first use, so that importing the registry does not load GTSAM."""
+    module: str
+    options: str
+    run: str
+
+    def options_type(self) -> type:
+        return getattr(importlib.import_module(self.module), self.options)
+
+    def run_function(self):
+        return getattr(importlib.import_module(self.module), self.run)
+
+
+REGISTRY: dict[Method, Entry] = {
+    Method.ekf: Entry("odomgraph.estimators.ekf", "EKFOptions", "run_ekf"),
+    Method.batch: Entry("odomgraph.estimators.batch", "SmootherOptions", "run_batch"),
+    Method.isam2: Entry("odomgraph.estimators.incremental", "IncrementalOptions", "run_isam2"),
+    Method.fixed_lag: Entry("odomgraph.estimators.incremental", "IncrementalOptions", "run_fixed_lag"),
+}
+
+
+def parse_method(method) -> Method:
+    """A Method from itself or its name; OptionError listing the valid ones otherwise."""
+    from odomgraph.errors import OptionError
+    try:
+        return Method(method.value if isinstance(method, Enum) else method)
+    except ValueError:
+        raise OptionError(f"unknown method {method!r}; valid: {', '.join(m.value for m in Method)}") from None
+
+
+def option_types() -> list[type]:
+    """Every estimator's options dataclass, each once."""
+    out: list[type] = []
+    for e in REGISTRY.values():
+        if (t := e.options_type()) not in out:
+            out.append(t)
+    return out
+
+
+def check_option_names(options: dict) -> None:
+    """Every option must belong to some estimator's options (a typo is an error,
+    not a default), and lie in its declared range even where this method does
+    not use it (the CLI passes one set to every method)."""
+    from odomgraph.checks import field_ranges, option_name, unknown_names, value_problem, value_text
+    from odomgraph.errors import OptionError
+    types = option_types()
+    known = {name for t in types for name in t.__dataclass_fields__}
+    msg = unknown_names(list(options), known, "option")
+    if msg:
+        raise OptionError(msg)
+    ranges: dict = {}
+    for t in types:
+        ranges |= field_ranges(t)
+    for k, v in options.items():
+        if v is not None and k in ranges and (problem := value_problem(v, ranges[k])):
+            raise OptionError(f"{k} ({option_name(k)}) {problem}, got {value_text(v)}")
+
+
+def run(log, method, schedule, progress, options: dict):
+    """Run ``method`` over ``log`` with the ``options`` its options type takes
+    (the CLI passes one set for every method; None values mean the default)."""
+    from odomgraph.errors import OdomgraphError
+    method = parse_method(method)
+    if options.get("range_bias") and method is not Method.batch:
+        raise OdomgraphError(f"--range-bias is estimated by the batch smoother only, not by {method.value}")
+    if method is Method.ekf and schedule.calibrate_until is None:
+        raise OdomgraphError("the EKF needs a schedule: --calibrate-until none (slip and scale together) "
+                             "is for the smoothers; use a number of seconds (0 = slip only)")
+    entry = REGISTRY[method]
+    cls = entry.options_type()
+    opts = cls(**{k: v for k, v in options.items() if k in cls.__dataclass_fields__ and v is not None})
+    return entry.run_function()(log, schedule, opts, progress)
