@@ -97,6 +97,11 @@ class ImportKind(str, Enum):
     rosbag = "rosbag"
 
 
+class AtName(str, Enum):
+    truth = "truth"
+    gps = "gps"
+
+
 class HoldName(str, Enum):
     consider = "consider"
     pseudo = "pseudo"
@@ -395,9 +400,14 @@ def estimate(
     time_offset: Annotated[bool, typer.Option(
         "--time-offset", help="Estimate how late the GPS stamps are against the wheels, and apply it "
                               "(without it, a clear offset is only warned about).")] = False,
+    rate: Annotated[Optional[float], typer.Option(
+        min=1e-6, help="Write the states at this regular rate [Hz] (smoother rows are interpolated along "
+                       "the arc between keyframes, with their sigma), for tools such as evo.")] = None,
+    at: Annotated[Optional[AtName], typer.Option(
+        help="Write the states at the truth's or the GPS fixes' times (interpolated as with --rate).")] = None,
 ):
     """Estimate states and odometry errors of a log; writes states.csv, trajectory.tum, summary.json
-    (and online.csv, the causal estimate, for isam2).
+    (and online.csv, the causal estimate, for isam2; truth.tum when the log has truth).
 
     Methods: ekf (the paper's filter), batch (whole-log smoother), isam2 (incremental smoother),
     fixed-lag (incremental smoother over a window). --calibrate-until none estimates slip and
@@ -411,7 +421,8 @@ def estimate(
         s = estimate_to_dir(log, output, Method(method.value), schedule, progress=bar, gate=gate,
                             keyframe_hz=keyframe_hz, lag=lag, slip_cauchy=slip_cauchy,
                             robust=robust.value if robust else None, robust_k=robust_k,
-                            range_bias=range_bias or None, time_offset=time_offset)
+                            range_bias=range_bias or None, time_offset=time_offset, rate=rate,
+                            at=at.value if at else None)
     _print_summary(s)
     typer.echo(f"wrote {output}")
 

@@ -289,18 +289,50 @@ def summary(est: Estimate, log: Log, schedule: Schedule) -> dict:
     return out
 
 
-def estimate_to_dir(log: Log, out: Path, method: Method, schedule: Schedule, progress=None, **options) -> dict:
+def estimate_to_dir(log: Log, out: Path, method: Method, schedule: Schedule, progress=None, rate: float | None = None,
+                    at: str | None = None, **options) -> dict:
     """Estimate and write the estimate directory; returns the summary.
 
     The output is checked before the work starts (io.outdir): it must not be,
-    hold or lie inside the log."""
-    from odomgraph.io.estimate import write_estimate
+    hold or lie inside the log. ``rate`` [Hz] or ``at`` ("truth" or "gps")
+    writes the rows at regular or at those sensors' times (analysis.resample,
+    for evo); summary.json scores the estimator's own rows either way. A log
+    with truth gets truth.tum beside trajectory.tum."""
+    from odomgraph.io.estimate import truth_tum_text, write_estimate
+    from odomgraph.io.log import rebased
     from odomgraph.io.outdir import check_output
     inputs = (log.path,) if log.path else ()
     check_output(out, inputs)
+    if rate is not None and at is not None:
+        raise OdomgraphError("give --rate or --at, not both")
+    log = rebased(log)
+    if at is not None:
+        src = {"truth": log.truth, "gps": log.gps}.get(at, "bad")
+        if src == "bad":
+            raise OdomgraphError(f"--at must be truth or gps, got {at!r}")
+        if src is None or not len(src.t):
+            raise OdomgraphError(f"--at {at}: the log has no {at}")
+    if rate is not None and not rate > 0:
+        raise OdomgraphError(f"--rate must be a positive number of Hz, got {rate!r}")
     est = estimate(log, method, schedule, progress, **options)
     summ = summary(est, log, schedule)
-    write_estimate(est, out, summ, inputs)
+    rows = est
+    if rate is not None or at is not None:
+        from odomgraph.analysis.resample import regular_times, resampled
+        times = regular_times(est, rate) if rate is not None else src.t
+        from dataclasses import replace
+        rows = replace(resampled(est, times), online=est.online)  # online.csv stays the causal estimate
+        summ["rows"] = {"rate_hz": rate} if rate is not None else {"at": at}
+        summ["rows"]["n"] = int(len(rows.t))
+        rows_err = truth_errors(rows, log)
+        if rows_err is not None:
+            # what evo computes from trajectory.tum and truth.tum
+            summ["rows"]["rms_position_m"] = rows_err.rms_position_m
+    truth = None
+    if log.truth is not None and "theta" in log.truth.values:
+        tr = log.truth
+        truth = truth_tum_text(tr.t, tr.values["x"], tr.values["y"], tr.values["theta"], log.t_origin)
+    write_estimate(rows, out, summ, inputs, truth_tum=truth)
     return summ
 
 

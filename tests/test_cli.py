@@ -29,7 +29,8 @@ def estimated(tmp_path_factory, paper_log_dir):
 
 def test_estimate_writes_the_contract_files(estimated):
     out, output = estimated
-    assert sorted(p.name for p in out.iterdir() if p.name != ".odomgraph") == ["states.csv", "summary.json", "trajectory.tum"]
+    assert sorted(p.name for p in out.iterdir() if p.name != ".odomgraph") == ["states.csv", "summary.json",
+                                                                               "trajectory.tum", "truth.tum"]
     header = (out / "states.csv").read_text().splitlines()[0]
     assert header.split(",") == STATE_COLUMNS
     data = np.loadtxt(out / "states.csv", delimiter=",", skiprows=1)
@@ -143,7 +144,8 @@ def test_smoother_methods_write_the_contract_files(tmp_path, method):
     res = run("estimate", log, "--method", method, "--keyframe-hz", "5", "--lag", "3", "-o", out)
     assert res.exit_code == 0, res.output
     files = sorted(p.name for p in out.iterdir() if p.name != ".odomgraph")
-    expected = ["states.csv", "summary.json", "trajectory.tum"] + (["online.csv"] if method == "isam2" else [])
+    expected = ["states.csv", "summary.json", "trajectory.tum", "truth.tum"] + (["online.csv"] if method == "isam2"
+                                                                                else [])
     assert files == sorted(expected)
     assert (out / "states.csv").read_text().splitlines()[0].split(",") == STATE_COLUMNS
     if method == "isam2":

@@ -100,17 +100,34 @@ def test_missing_robot_key(log_copy):
     expect_error(log_copy, "robot.toml", "[wheels.ticks_per_meter_left] is missing")
 
 
-def test_comments_and_extra_columns_are_allowed(log_copy):
+def test_comments_and_extra_columns_are_allowed(log_copy, paper_log_dir, paper_log):
     p = log_copy / "gyro.csv"
     lines = p.read_text().splitlines()
-    body = [lines[0] + ",temperature"] + [ln + ",21.5" for ln in lines[1:]]
-    p.write_text("# gyro from the IMU\n" + "\n".join(body[:5]) + "\n# a comment mid-file\n" + "\n".join(body[5:]) + "\n")
+    assert lines[0] == "t,omega"
+    # extra columns before, between and after the known ones (found by name, not
+    # position), each with values of its own that no known column holds
+    rows = [ln.split(",") for ln in lines[1:]]
+    body = ["temperature,t,status,omega,note"] + [f"{20 + 0.01 * k:.2f},{t},{k % 7},{w},x{k}"
+                                                 for k, (t, w) in enumerate(rows)]
+    p.write_text("# gyro from the IMU\n" + "\n".join(body[:5]) + "\n# a comment mid-file\n\n"
+                 + "\n".join(body[5:]) + "\n# and one at the end\n")
     log = read_log(log_copy)
     assert log.gyro.t.size == len(lines) - 1
-    # the values are the file's, column by column, the extra column ignored
-    ref = np.array([[float(v) for v in ln.split(",")] for ln in lines[1:]])
+    # the values are the file's, column by column, the extra columns ignored
+    ref = np.array([[float(v) for v in r] for r in rows])
     np.testing.assert_array_equal(log.gyro.t, ref[:, 0])
     np.testing.assert_array_equal(log.gyro.omega, ref[:, 1])
+    # ...exactly what the same log reads without them, and the source data to half
+    # the last digit written (stamps with 6 decimals, yaw rates with 7: measured
+    # 4.9993e-7 s and 4.996e-8 rad/s at most)
+    plain = read_log(paper_log_dir)
+    np.testing.assert_array_equal(log.gyro.t, plain.gyro.t)
+    np.testing.assert_array_equal(log.gyro.omega, plain.gyro.omega)
+    np.testing.assert_allclose(log.gyro.t, paper_log.gyro.t, rtol=0, atol=5.0001e-7)
+    np.testing.assert_allclose(log.gyro.omega, paper_log.gyro.omega, rtol=0, atol=5.0001e-8)
+    # and the other sensors are untouched
+    np.testing.assert_array_equal(log.encoders.ticks_left, plain.encoders.ticks_left)
+    np.testing.assert_array_equal(log.gps.x, plain.gps.x)
 
 
 def test_latlon_gps_is_projected(tmp_path, paper_log):

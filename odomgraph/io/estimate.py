@@ -25,20 +25,33 @@ def write_states(path: Path, est: Estimate) -> None:
     write_table(path, states_columns(est), {k: "%.9g" for k in S.NAMES + tuple(f"sigma_{n}" for n in S.NAMES)})
 
 
+def _tum_lines(t_text, x, y, theta) -> str:
+    return "".join(f"{t} {xi:.6f} {yi:.6f} 0 0 0 {np.sin(th / 2):.9f} {np.cos(th / 2):.9f}\n"
+                   for t, xi, yi, th in zip(t_text, x, y, theta))
+
+
 def tum_text(est: Estimate) -> str:
-    """TUM trajectory lines ``t x y z qx qy qz qw`` (z = 0, yaw-only quaternion)."""
-    th = est.mean[:, S.THETA]
-    rows = np.column_stack([est.mean[:, S.X], est.mean[:, S.Y], np.sin(th / 2), np.cos(th / 2)])
-    return "".join(f"{t} {r[0]:.6f} {r[1]:.6f} 0 0 0 {r[2]:.9f} {r[3]:.9f}\n"
-                   for t, r in zip(stamp_text(est.t, est.t_origin), rows))
+    """TUM trajectory lines ``t x y z qx qy qz qw`` (z = 0, yaw-only
+    quaternion), after one ``#`` comment naming the method, so that evo's
+    legends tell the files apart (evo and numpy.loadtxt skip the comment)."""
+    return (f"# odomgraph {est.method}: t x y z qx qy qz qw\n"
+            + _tum_lines(stamp_text(est.t, est.t_origin), est.mean[:, S.X], est.mean[:, S.Y], est.mean[:, S.THETA]))
 
 
-def write_estimate(est: Estimate, out_dir: Path | str, summary: dict, inputs=()) -> Path:
+def truth_tum_text(t: np.ndarray, x: np.ndarray, y: np.ndarray, theta: np.ndarray, t_origin: int = 0) -> str:
+    """truth.tum: the log's truth.csv rows (robot frame origin, world frame) as TUM lines."""
+    return "# odomgraph truth: t x y z qx qy qz qw\n" + _tum_lines(stamp_text(t, t_origin), x, y, theta)
+
+
+def write_estimate(est: Estimate, out_dir: Path | str, summary: dict, inputs=(), truth_tum: str | None = None) -> Path:
     """Write ``est`` and its ``summary`` dict (see ``summary``) atomically.
-    ``inputs``: paths the output must not touch (io.outdir)."""
+    ``inputs``: paths the output must not touch (io.outdir). ``truth_tum``
+    (see truth_tum_text) is written as truth.tum beside trajectory.tum."""
     with atomic_output_dir(out_dir, inputs, kind="estimate") as d:
         write_states(d / "states.csv", est)
         (d / "trajectory.tum").write_text(tum_text(est), encoding="utf-8")
+        if truth_tum is not None:
+            (d / "truth.tum").write_text(truth_tum, encoding="utf-8")
         if est.online is not None:
             write_states(d / "online.csv", est.online)
         (d / "summary.json").write_text(json.dumps(summary, indent=2) + "\n", encoding="utf-8")

@@ -1,0 +1,84 @@
+"""An estimate at other times: regular (``--rate HZ``) or a sensor's
+(``--at truth|gps``), for tools such as evo that associate poses by time.
+
+The smoothers keep one state per keyframe, and evo's default association
+(0.01 s) then matches almost none of them to a 100 Hz truth. Between two rows
+the pose moves along the constant-curvature arc that joins them (the motion
+model of eq. 2-6 with the interval's mean turn rate), corrected linearly so
+that it meets both rows exactly; the other states and every sigma and
+covariance are interpolated linearly. Outside the estimate's span nothing is
+extrapolated: those times are dropped.
+"""
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+
+from odomgraph import state as S
+from odomgraph.result import Estimate
+
+
+def _sinc(x: np.ndarray) -> np.ndarray:
+    return np.sinc(x / np.pi)  # sin(x)/x, 1 at 0
+
+
+def _wrap(a: np.ndarray) -> np.ndarray:
+    return (a + np.pi) % (2 * np.pi) - np.pi
+
+
+def arc_poses(t0, p0, t1, p1, t) -> np.ndarray:
+    """(M, 3) poses (x, y, theta) [m, m, rad] at times t in [t0, t1] on the
+    arc from pose p0 at t0 to p1 at t1 (arrays (M,) and (M, 3), one interval
+    per row): heading turns at the constant rate that joins the two
+    headings, the position follows the arc of that curvature through the
+    chord's length, and the remaining difference at t1 is spread linearly."""
+    dt = np.maximum(t1 - t0, 1e-12)
+    s = np.clip((t - t0) / dt, 0.0, 1.0)
+    dth = _wrap(p1[:, 2] - p0[:, 2])
+    chord = np.hypot(p1[:, 0] - p0[:, 0], p1[:, 1] - p0[:, 1])
+    # arc length that gives this chord at this total turn (chord = L sinc(dth/2))
+    length = chord / np.maximum(_sinc(dth / 2), 1e-6)
+
+    def at(frac):
+        turn = frac * dth
+        d = frac * length * _sinc(turn / 2)
+        heading = p0[:, 2] + turn / 2
+        return np.column_stack([p0[:, 0] + d * np.cos(heading), p0[:, 1] + d * np.sin(heading), p0[:, 2] + turn])
+    end = at(np.ones_like(s))
+    miss = p1 - end
+    miss[:, 2] = _wrap(miss[:, 2])
+    out = at(s) + s[:, None] * miss
+    out[:, 2] = _wrap(out[:, 2])
+    return out
+
+
+def resampled(est: Estimate, times: np.ndarray) -> Estimate:
+    """``est`` at ``times`` [s, est's clock] inside its span (others dropped).
+    Rows of ``est`` at the same time are kept as they are. The result has no
+    innovations or online estimate of its own; every other field is est's."""
+    times = np.asarray(times, dtype=float)
+    times = times[(times >= est.t[0]) & (times <= est.t[-1])]
+    k = np.clip(np.searchsorted(est.t, times, side="right") - 1, 0, max(len(est.t) - 2, 0))
+    if len(est.t) == 1:
+        k1 = k
+        w = np.zeros_like(times)
+    else:
+        k1 = k + 1
+        w = (times - est.t[k]) / np.maximum(est.t[k1] - est.t[k], 1e-12)
+    w = np.clip(w, 0.0, 1.0)
+    lin = (1 - w)[:, None] * est.mean[k] + w[:, None] * est.mean[k1]
+    pose = arc_poses(est.t[k], est.mean[k][:, S.POSE], est.t[k1], est.mean[k1][:, S.POSE], times)
+    lin[:, S.POSE] = pose
+    sigma = (1 - w)[:, None] * est.sigma[k] + w[:, None] * est.sigma[k1]
+    cov = None
+    if est.pose_cov is not None:
+        cov = (1 - w)[:, None, None] * est.pose_cov[k] + w[:, None, None] * est.pose_cov[k1]
+    return replace(est, t=times, mean=lin, sigma=sigma, pose_cov=cov, innovations={}, online=None,
+                   update_times=None)
+
+
+def regular_times(est: Estimate, rate_hz: float) -> np.ndarray:
+    """Times at ``rate_hz`` from the estimate's first row to its last."""
+    n = int(np.floor((est.t[-1] - est.t[0]) * rate_hz + 1e-9)) + 1
+    return est.t[0] + np.arange(n) / rate_hz
