@@ -7,15 +7,18 @@ Library first: every CLI command is a function here.
 * ``odomgraph.estimators``: the EKF of Kreinar & Quinn (and the smoothers), all
   returning the same ``Estimate``.
 * ``odomgraph.analysis``: metrics against truth, consistency, plots.
+* ``odomgraph.pipeline`` and ``odomgraph.runs``: estimate, calibrate, compare.
 """
 __version__ = "0.1.0"
 
 #: The public API, imported on first use (``import odomgraph`` stays light):
 #: ``odomgraph.read_log(DIR)``, ``odomgraph.estimate(log, "batch")``,
-#: ``odomgraph.calibrate(log)``, ``odomgraph.simulate(scenario, seed)``.
+#: ``odomgraph.calibrate(log)``, ``odomgraph.compare(log)`` (every estimator
+#: side by side), ``odomgraph.simulate(scenario, seed)``.
 _API = {"read_log": "odomgraph.io.log", "write_log": "odomgraph.io.log", "estimate": "odomgraph.pipeline",
-        "calibrate": "odomgraph.pipeline", "Method": "odomgraph.pipeline", "Schedule": "odomgraph.estimators.schedule",
-        "simulate": "odomgraph.sim.simulate", "Estimate": "odomgraph.result"}
+        "calibrate": "odomgraph.pipeline", "Method": "odomgraph.estimators.registry",
+        "Schedule": "odomgraph.estimators.schedule", "simulate": "odomgraph.sim.simulate",
+        "Estimate": "odomgraph.result", "compare": "odomgraph.runs"}
 __all__ = ["__version__", *_API]
 
 

@@ -36,7 +36,7 @@ class _OneLineErrors(TyperGroup):
             rv = 0
         except _click_exc.ClickException as exc:
             msg = " ".join(exc.format_message().split())
-            if isinstance(exc, _click_exc.UsageError) and exc.ctx is not None:
+            if isinstance(exc, _click_exc.UsageError) and exc.ctx is not None and exc.ctx.parent is not None:
                 msg = f"{exc.ctx.command_path}: {msg}"
             typer.echo(f"odomgraph: error: {msg}", err=True)
             rv = 1
@@ -51,7 +51,7 @@ class _OneLineErrors(TyperGroup):
 def _version(value: bool):
     if value:
         from odomgraph import __version__
-        typer.echo(f"odomgraph {__version__}")
+        _out(f"odomgraph {__version__}")
         raise typer.Exit()
 
 
@@ -65,12 +65,32 @@ app = typer.Typer(
 )
 
 
+#: 0: -q (errors and warnings only), 1: default, 2: -v (also what was used, rejected and recovered).
+_VERBOSITY = [1]
+
+
+def _out(message: str = "", level: int = 1) -> None:
+    """An informational line on stdout, shown at verbosity ``level`` or above
+    (errors and warnings go to stderr whatever -q says)."""
+    if _VERBOSITY[0] >= level:
+        typer.echo(message)
+
+
 @app.callback()
 def _root(version: Annotated[bool, typer.Option("--version", callback=_version, is_eager=True,
-                                                help="Print the version and exit.")] = False):
+                                                help="Print the version and exit.")] = False,
+          quiet: Annotated[bool, typer.Option("--quiet", "-q", help="Only errors and warnings (on stderr); "
+                                                                   "no progress bars.")] = False,
+          verbose: Annotated[bool, typer.Option("--verbose", "-v", help="Also print the measurements used, "
+                                                                       "rejected and down-weighted per sensor, "
+                                                                       "recoveries and fitted noise scales.")]
+          = False):
     """Wheel-odometry error estimation (scale factors + per-wheel slip) for differential-drive robots.
 
     Logs and outputs follow LOG_FORMAT.md. Start with `odomgraph demo`."""
+    if quiet and verbose:
+        raise _click_exc.UsageError("give -q or -v, not both")
+    _VERBOSITY[0] = 0 if quiet else 2 if verbose else 1
 
 
 class ScenarioName(str, Enum):
@@ -143,7 +163,7 @@ class _Progress:
     def __init__(self, label: str):
         # Only on a terminal: piped into a file, a bar is noise (and rich
         # leaves an empty line behind).
-        self._on = sys.stderr.isatty()
+        self._on = sys.stderr.isatty() and _VERBOSITY[0] > 0
         if not self._on:
             return
         from rich.console import Console
@@ -191,13 +211,13 @@ def _print_comparison(m: dict) -> None:
     keep = [0, 1, 2, 3, 7, 9]  # the columns that fit a terminal
     widths = [max(len(r[i]) for r in rows) for i in keep]
     for r in rows:
-        typer.echo("  ".join(r[i].ljust(w) for i, w in zip(keep, widths)))
-    typer.echo(f"reference: {m['reference_note']}")
+        _out("  ".join(r[i].ljust(w) for i, w in zip(keep, widths)))
+    _out(f"reference: {m['reference_note']}")
     for label, e in m["estimators"].items():
         if "failed" in e and label != "isam2-online":
-            typer.echo(f"{label}: {e['failed']}")
+            _out(f"{label}: {e['failed']}")
         for b, v in (e.get("range_bias") or {}).items():
-            typer.echo(f"{label}: range bias {b:<8} {v['value']:+.3f} ± {v['sigma']:.3f} m")
+            _out(f"{label}: range bias {b:<8} {v['value']:+.3f} ± {v['sigma']:.3f} m")
 
 
 def _parse_schedule(calibrate_until: str, hold: HoldName):
@@ -216,28 +236,35 @@ def _parse_schedule(calibrate_until: str, hold: HoldName):
 
 def _print_summary(s: dict) -> None:
     cal = s["calibration"]
-    typer.echo(f"{s['method']}: {s['n_steps']} rows, {s['n_updates']} updates in {s['wall_time_s']:.2f} s "
+    _out(f"{s['method']}: {s['n_steps']} rows, {s['n_updates']} updates in {s['wall_time_s']:.2f} s "
                f"({s['updates_per_second']:.0f} updates/s)")
     truth = s.get("truth_scales", {})
     for k, v in cal.items():
         tv = f"   truth {truth[k]:.4f}" if k in truth else ""
-        typer.echo(f"  {k:<12} {v['value']:.4f} ± {v['sigma']:.4f}{tv}")
+        _out(f"  {k:<12} {v['value']:.4f} ± {v['sigma']:.4f}{tv}")
     for key, label in (("errors", ""), ("errors_online", " (online)")):
         if key in s:
             e = s[key]
             slip = ", ".join(f"{w} {v:.3f}" for w, v in e["rms_slip_mps"].items())
-            typer.echo(f"  RMS position error{label} {e['rms_position_m']:.3f} m; RMS slip error after calibration: "
+            _out(f"  RMS position error{label} {e['rms_position_m']:.3f} m; RMS slip error after calibration: "
                        f"{slip} m/s")
     if "update_time_ms" in s:
         u = s["update_time_ms"]
-        typer.echo(f"  update time: mean {u['mean']:.2f} ms, first 10% {u['first_10pct']:.2f} ms, "
+        _out(f"  update time: mean {u['mean']:.2f} ms, first 10% {u['first_10pct']:.2f} ms, "
                    f"last 10% {u['last_10pct']:.2f} ms")
     for b, v in s.get("range_bias", {}).items():
-        typer.echo(f"  range bias {b:<8} {v['value']:+.3f} ± {v['sigma']:.3f} m")
+        _out(f"  range bias {b:<8} {v['value']:+.3f} ± {v['sigma']:.3f} m")
     for n in s["notes"]:
-        typer.echo(f"  note: {n}")
+        _out(f"  note: {n}")
+    for sensor, n in s.get("used", {}).items():
+        _out(f"  {sensor}: {n} used, {s.get('rejected', {}).get(sensor, 0)} rejected, "
+             f"{s.get('downweighted', {}).get(sensor, 0)} down-weighted", level=2)
+    for r in s.get("recoveries", []):
+        _out(f"  recovery: {r}", level=2)
+    for sensor, v in s.get("noise_scales", {}).items():
+        _out(f"  noise scale {sensor}: measured {v['measured']:.2f}, applied {v['applied']:.2f}", level=2)
     why = "; ".join(s.get("status_reasons", []))
-    typer.echo(f"  status: {s['status']}" + (f" ({why})" if why else ""))
+    _out(f"  status: {s['status']}" + (f" ({why})" if why else ""))
     for w in s.get("warnings", []):
         typer.echo(f"odomgraph: warning: {' '.join(str(w).split())}", err=True)
 
@@ -364,7 +391,7 @@ def simulate(
                     spikes=tuple(parse("spike", v) for v in spike or ()))
     log = inject(sc, faults, seed)
     write_log(log, output)
-    typer.echo(f"wrote {output} ({sc.name}, {sc.duration:g} s, seed {seed})")
+    _out(f"wrote {output} ({sc.name}, {sc.duration:g} s, seed {seed})")
 
 
 @app.command()
@@ -424,7 +451,7 @@ def estimate(
                             range_bias=range_bias or None, time_offset=time_offset, rate=rate,
                             at=at.value if at else None)
     _print_summary(s)
-    typer.echo(f"wrote {output}")
+    _out(f"wrote {output}")
 
 
 @app.command()
@@ -447,7 +474,7 @@ def demo(
         cmp = compare_to_dir(log, output, Schedule(calibrate_until=sc.calibrate_until), bars,
                              title=f"odomgraph demo: paper scenario (sec. IV), seed {seed}", include_log=True)
     _print_comparison(cmp.metrics)
-    typer.echo(f"wrote {output}/report.html (open it in a browser), the figures, metrics.json, "
+    _out(f"wrote {output}/report.html (open it in a browser), the figures, metrics.json, "
                f"{output}/log and one estimate directory per estimator")
 
 
@@ -482,7 +509,7 @@ def compare(
         cmp = compare_to_dir(log, output, schedule, bars, gate=gate, keyframe_hz=keyframe_hz,
                              robust=robust.value if robust else None, range_bias=range_bias or None)
     _print_comparison(cmp.metrics)
-    typer.echo(f"wrote {output}/report.html")
+    _out(f"wrote {output}/report.html")
 
 
 @app.command()
@@ -529,8 +556,8 @@ def montecarlo(
     files = write_outputs(spec, results, output)
     for f in findings(spec, results):
         verdict = {True: "reproduces", False: "does NOT reproduce", None: "grid cannot tell"}[f["holds"]]
-        typer.echo(f"paper: {f['claim']}\n  ours: {f['measured']} -> {verdict}")
-    typer.echo("wrote " + ", ".join(str(f) for f in files))
+        _out(f"paper: {f['claim']}\n  ours: {f['measured']} -> {verdict}")
+    _out("wrote " + ", ".join(str(f) for f in files))
 
 
 @app.command()
@@ -570,25 +597,25 @@ def calibrate(
         v = rep[key]
         held = [n for n in names if n in unobs]
         tail = f"  ({held[0]} not determined: kept at nominal)" if held else ""
-        typer.echo(f"{key:<22} {old:.6g} -> {v['value']:.6g} ± {v['sigma']:.2g}{tail}")
+        _out(f"{key:<22} {old:.6g} -> {v['value']:.6g} ± {v['sigma']:.2g}{tail}")
     if rep["held_out"]:
-        typer.echo(rep["held_out"]["text"])
+        _out(rep["held_out"]["text"])
     if rep.get("time_offsets"):
         o = rep["time_offsets"]["gps"]
-        typer.echo(f"GPS time offset {o['value']:+.3f} ± {o['sigma']:.3f} s (written as [gps] time_offset)")
+        _out(f"GPS time offset {o['value']:+.3f} ± {o['sigma']:.3f} s (written as [gps] time_offset)")
     pn = rep["process_noise"]
     if pn["held_out_rms_m"]:
         cv = ", ".join(f"x{r['factor']:g}: {100 * r['rms_m']:.2f} cm" for r in pn["held_out_rms_m"])
-        typer.echo(f"process noise: accel {pn['accel']:.3g} m/s^2/sqrt(Hz), yaw {pn['yaw_accel']:.3g} rad/s^2/sqrt(Hz) "
+        _out(f"process noise: accel {pn['accel']:.3g} m/s^2/sqrt(Hz), yaw {pn['yaw_accel']:.3g} rad/s^2/sqrt(Hz) "
                    f"(held-out fix error by multiple of the default: {cv})")
     a, b = rep["dead_reckoning_nominal"], rep["dead_reckoning_calibrated"]
-    typer.echo(f"dead reckoning on this log (vs {rep['reference']}): RMS {a['rms_m']:.3f} -> {b['rms_m']:.3f} m, "
+    _out(f"dead reckoning on this log (vs {rep['reference']}): RMS {a['rms_m']:.3f} -> {b['rms_m']:.3f} m, "
                f"final {a['final_m']:.3f} -> {b['final_m']:.3f} m")
     for w in rep["warnings"]:
         typer.echo(f"odomgraph: warning: {' '.join(str(w).split())}", err=True)
     for w in rep["problems"]:
         typer.echo(f"odomgraph: warning: written with --force despite: {' '.join(str(w).split())}", err=True)
-    typer.echo(f"wrote {output}")
+    _out(f"wrote {output}")
 
 
 @app.command("import")
@@ -641,13 +668,13 @@ def import_(
         from odomgraph.io.importers.rosbag import list_topics as topics_of
         topics, frames = topics_of(source)
         w = max([len(t.topic) for t in topics] + [5])
-        typer.echo(f"{'topic':<{w}}  {'type':<34} {'count':>7} {'rate':>9}  picked as")
+        _out(f"{'topic':<{w}}  {'type':<34} {'count':>7} {'rate':>9}  picked as")
         for t in topics:
-            typer.echo(f"{t.topic:<{w}}  {t.msgtype:<34} {t.count:>7} {t.rate_hz:>6.1f} Hz  {t.role or ''}")
+            _out(f"{t.topic:<{w}}  {t.msgtype:<34} {t.count:>7} {t.rate_hz:>6.1f} Hz  {t.role or ''}")
         for f in frames:
-            typer.echo(f"tf_static: {f}")
+            _out(f"tf_static: {f}")
         if not frames:
-            typer.echo("tf_static: none")
+            _out("tf_static: none")
         return
     if output is None:
         raise OdomgraphError("import needs --output/-o, the log directory to write")
@@ -680,7 +707,7 @@ def import_(
         raise LogFormatError(source, f"the import would give a log that cannot be used: {exc.path.name}: "
                                      f"{exc.problem}") from None
     write_log(log, output, inputs)
-    typer.echo(f"wrote {output} ({'; '.join(log.notes)})")
+    _out(f"wrote {output} ({'; '.join(log.notes)})")
     for w in log.warnings:
         typer.echo(f"odomgraph: warning: {' '.join(str(w).split())}", err=True)
 

@@ -81,6 +81,30 @@ class Estimate:
         n = len(self.t)
         assert self.mean.shape == (n, state.N) and self.sigma.shape == (n, state.N)
 
+    @property
+    def columns(self) -> tuple[str, ...]:
+        """The names of ``named()``'s arrays: states.csv's columns (LOG_FORMAT.md)."""
+        return ("t", *state.NAMES, *(f"sigma_{n}" for n in state.NAMES))
+
+    def named(self) -> dict[str, np.ndarray]:
+        """{column: (N,) array} in states.csv's order and units: ``t`` [s since
+        t_origin], each state by name, and its 1-sigma as ``sigma_<name>``."""
+        out = {"t": self.t}
+        out.update({n: self.mean[:, i] for i, n in enumerate(state.NAMES)})
+        out.update({f"sigma_{n}": self.sigma[:, i] for i, n in enumerate(state.NAMES)})
+        return out
+
+    def frame(self):
+        """``named()`` as a pandas DataFrame (pandas is not a dependency: an
+        OdomgraphError says so when it is not installed)."""
+        try:
+            import pandas as pd
+        except ImportError:
+            from odomgraph.errors import OdomgraphError
+            raise OdomgraphError("Estimate.frame() needs pandas (pip install pandas); named() gives the same "
+                                 "columns as a dict of arrays") from None
+        return pd.DataFrame(self.named())
+
     def scale_cov(self, given: bool = False) -> np.ndarray:
         """(3, 3) covariance of the final scale factors: honest, or with
         ``given`` conditional on the pinned combinations (see the fields)."""

@@ -27,6 +27,12 @@ from odomgraph.sim.faults import Faults
 
 
 # ------------------------------------------------------------- comparison
+def compare(log: Log, schedule: Schedule = Schedule(), progress_for=None, **options) -> Comparison:
+    """Every estimator on ``log``, scored side by side (``odomgraph.compare``;
+    see run_comparison). ``Comparison.metrics`` is metrics.json's content."""
+    return run_comparison(log, schedule, progress_for, **options)
+
+
 def run_comparison(log: Log, schedule: Schedule, progress_for=None, **options) -> Comparison:
     """Run every estimator of ESTIMATORS (and the no-slip EKF) on ``log``.
 

@@ -182,3 +182,24 @@ def test_calibrate_recovers_the_parameters_and_helps_dead_reckoning(tmp_path):
     line = [ln for ln in res.output.splitlines() if ln.startswith("dead reckoning")][0]
     rms = [float(x) for x in line.split("RMS ")[1].split(" m")[0].split(" -> ")]
     assert rms[1] < 0.2 * rms[0]
+
+
+def test_quiet_prints_nothing_and_verbose_prints_the_counts(tmp_path, paper_log_dir):
+    r = CliRunner()
+    q = r.invoke(app, ["-q", "estimate", str(paper_log_dir), "--method", "ekf", "-o", str(tmp_path / "q")])
+    assert q.exit_code == 0 and q.stdout == "", q.stdout
+    v = r.invoke(app, ["-v", "estimate", str(paper_log_dir), "--method", "ekf", "-o", str(tmp_path / "v")])
+    assert v.exit_code == 0
+    s = json.loads((tmp_path / "v" / "summary.json").read_text())
+    for sensor, n in s["used"].items():
+        line = (f"  {sensor}: {n} used, {s['rejected'].get(sensor, 0)} rejected, "
+                f"{s['downweighted'].get(sensor, 0)} down-weighted")
+        assert line in v.stdout.splitlines(), (line, v.stdout)
+    # the default prints the summary without those lines, and -q's files are the same
+    d = r.invoke(app, ["estimate", str(paper_log_dir), "--method", "ekf", "-o", str(tmp_path / "d")])
+    assert "ekf: " in d.stdout and " used, " not in d.stdout
+    a = np.loadtxt(tmp_path / "q" / "states.csv", delimiter=",", skiprows=1)
+    b = np.loadtxt(tmp_path / "d" / "states.csv", delimiter=",", skiprows=1)
+    np.testing.assert_array_equal(a, b)
+    both = r.invoke(app, ["-q", "-v", "estimate", str(paper_log_dir), "-o", str(tmp_path / "x")])
+    assert both.exit_code != 0 and not (tmp_path / "x").exists()

@@ -155,7 +155,8 @@ def _w_block(J, inputs):
 
 
 def _edge_case(name):
-    """(values, [(factor, expected error, expected Jacobian blocks, key dims)]) of one edge state."""
+    """(values, [(factor, its error by the numpy model, its Jacobian blocks by the numpy
+    model with pose blocks in the body-frame tangent)]) of one edge state, in FACTOR_NAMES order."""
     from odomgraph.factors import encoder, gps, gyro, motion, pseudo, ranging, velocity
     c = EDGE_STATES[name]
     lever = c.get("lever", (-0.45, 0.1))

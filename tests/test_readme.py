@@ -1,6 +1,8 @@
 """Issue 18: the READMEs' results blocks are what benchmarks/results/ say."""
 import re
 
+import pytest
+
 from benchmarks.readme_blocks import BLOCK, BLOCKS, READMES, differing, render
 
 
@@ -21,3 +23,24 @@ def test_render_rewrites_only_inside_blocks(tmp_path):
     assert new.startswith("before 1.23\n<!-- results:ekf_throughput -->\n- **Throughput:** ")
     assert new.endswith("\n<!-- /results:ekf_throughput -->\nafter 4.56\n") and "stale 9.99" not in new
     assert render(new) == new
+
+
+def test_the_python_api_example_runs_and_its_numbers_hold(tmp_path, monkeypatch):
+    """The README's Python API block, run as written (in a scratch directory)."""
+    from pathlib import Path
+
+    import numpy as np
+    text = (Path(__file__).resolve().parents[1] / "README.md").read_text(encoding="utf-8")
+    block = text.split("<!-- python-api -->", 1)[1].split("<!-- /python-api -->", 1)[0]
+    code = block.split("```python", 1)[1].split("```", 1)[0]
+    monkeypatch.chdir(tmp_path)
+    ns: dict = {}
+    exec(compile(code, "README.md (Python API)", "exec"), ns)
+    log, est, track = ns["log"], ns["est"], ns["track"]
+    true_track = log.truth_scales[2]
+    assert abs(track["value"] - true_track) < 3 * track["sigma"] and track["observable"]
+    assert list(ns["rows"]) == list(est.columns) and np.array_equal(ns["rows"]["sigma_x"], est.sigma[:, 0])
+    robot = ns["robot"]
+    assert robot.track_width == pytest.approx(log.robot.track_width * true_track, rel=0.01)
+    assert ns["report"]["held_out"]["calibrated"] < ns["report"]["held_out"]["nominal"]
+    assert 0 < ns["batch_rms"] < 0.05

@@ -107,7 +107,7 @@ def build_problem(log: Log, schedule: Schedule, options: SmootherOptions, causal
     loss = None if options.robust in (None, "none") else options.robust
     return Problem(kf, log.robot, mean, cov, zero, robust, slip_intensity(log.robot.process, meas), loss,
                    options.robust_k, options.range_bias_sigma if options.range_bias else None,
-                   options.velocity_loss, init=init, spikes=dict(meas.spikes))
+                   options.velocity_loss, init=init, spikes=dict(meas.spikes), meas=meas)
 
 
 def initial_guess(prob: Problem, ekf: Estimate) -> tuple[np.ndarray, np.ndarray]:
@@ -156,7 +156,7 @@ def robust_initial_guess(prob: Problem, meas) -> tuple[np.ndarray, np.ndarray]:
     W = np.zeros((kf.n, 8))
     W[:-1, 0], W[:-1, 1] = v, w
     W[-1] = W[-2]
-    W[:, 5:8] = prob.prior_mean[8:11]
+    W[:, 5:8] = prob.prior_mean[S.SCALE]
     W[:, 2] = prob.prior_mean[S.BIAS]
     fixes = None
     if meas.gps is not None:
@@ -554,7 +554,7 @@ def run_batch(log: Log, schedule: Schedule = Schedule(), options: SmootherOption
         pose, W = initial_guess(prob, initial)
         start = f"started from the {initial.method} estimate"
     else:
-        pose, W = growing_window_guess(prob, from_log(log))
+        pose, W = growing_window_guess(prob, prob.meas)
         start = "started from a growing-window solve (the EKF failed or had to recover)"
     if options.wheel_speed_units:
         prob.speed_ref = W[0, 5:8].copy()   # the units of the random walks (graph.linearize)
@@ -564,7 +564,7 @@ def run_batch(log: Log, schedule: Schedule = Schedule(), options: SmootherOption
     Sig = marginal_blocks(prob, pose, W, rb)
     if rb is not None:
         Sig, Sgg = Sig
-    given = Sig[-1][8:11, 8:11].copy()
+    given = Sig[-1][np.ix_(S.SCALE, S.SCALE)].copy()
     Sig = honest_blocks(prob, Sig)
     est = keyframe_rows(prob, pose, W, Sig, "batch")
     if rb is not None:
@@ -572,10 +572,9 @@ def run_batch(log: Log, schedule: Schedule = Schedule(), options: SmootherOption
                           for i, (b, v) in enumerate(zip(log.robot.beacons, rb))}
     est.wall_time_s = time.perf_counter() - wall0
     est.n_updates = _n_measurements(prob)
-    t0 = from_log(log).t_start
-    est.t_switch = None if schedule.calibrate_until is None else t0 + schedule.calibrate_until
-    est.calibration_sigma = np.sqrt(np.diagonal(Sig[-1])[8:11])
-    est.calibration_cov = Sig[-1][8:11, 8:11].copy()
+    est.t_switch = schedule.switch_time(prob.meas.t_start)
+    est.calibration_sigma = np.sqrt(np.diagonal(Sig[-1])[S.SCALE])
+    est.calibration_cov = Sig[-1][np.ix_(S.SCALE, S.SCALE)].copy()
     est.calibration_cov_given = given
     est.observability = prob.init.observability
     est.warnings = list(prob.init.warnings) + window_warnings(prob, schedule)

@@ -311,7 +311,7 @@ class EKF:
         out_var = np.empty((n_rows, S.N))
         out_pose = np.empty((n_rows, 3, 3))
         nis = {k: [] for k in range(5)}
-        t_switch = None if sch.calibrate_until is None else m.t_start + sch.calibrate_until
+        t_switch = sch.switch_time(m.t_start)
         switch_sigma = None
         track = r.track_width
         lever_gps, lever_rng = r.gps_lever_arm, r.range_lever_arm

@@ -31,6 +31,7 @@ import numpy as np
 from odomgraph.factors import encoder, gps as gps_model, gyro, pose2, ranging
 from odomgraph.factors.motion import arc_at, transition_residual
 from odomgraph.estimators.initial import InitialState
+from odomgraph.estimators.measurements import Measurements
 from odomgraph.estimators.keyframes import Keyframes
 from odomgraph.io.robot import RobotConfig
 
@@ -73,6 +74,8 @@ class Problem:
     Solvers start it large (every loss nearly quadratic, so a start far from
     the answer does not mistake good fixes for outliers) and lower it to 1."""
     init: "InitialState | None" = None
+    meas: "Measurements | None" = None
+    """The log's measurements the problem was built from (estimators.measurements)."""
     """The initialisation the prior came from (its observability and warnings)."""
     spikes: dict = None
     """Single-sample spikes the log's cleaning took out, per sensor (measurements.despike)."""

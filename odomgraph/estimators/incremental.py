@@ -41,7 +41,6 @@ from odomgraph.estimators.batch import (SmootherOptions, _factor_arrays, _n_meas
                                         honest_blocks, keyframe_rows, marginal_blocks, measurement_counts, retract,
                                         solve_window, window_warnings)
 from odomgraph.estimators.graph import NB, Problem, linearize, robust_counts
-from odomgraph.estimators.measurements import from_log
 from odomgraph.result import Estimate
 from odomgraph.estimators.schedule import Schedule
 from odomgraph.io.log import Log
@@ -285,8 +284,7 @@ class _Runner:
         est = self.finish()
         est.wall_time_s = time.perf_counter() - wall0
         est.n_updates = _n_measurements(self.prob)
-        t0 = from_log(self.log).t_start
-        est.t_switch = None if self.schedule.calibrate_until is None else t0 + self.schedule.calibrate_until
+        est.t_switch = self.schedule.switch_time(self.prob.meas.t_start)
         est.update_times = self.update_times[1:]
         est.recoveries = list(self.recoveries)
         est.rejected, est.downweighted = robust_counts(self.prob, self.pose, self.W)
@@ -713,7 +711,7 @@ class ISAM2Runner(_Runner):
         given = Sig[-1][8:11, 8:11].copy()
         Sig = honest_blocks(self.prob, Sig)
         est = keyframe_rows(self.prob, self.pose, self.W, Sig, "isam2")
-        est.calibration_sigma = np.sqrt(np.diagonal(Sig[-1])[8:11])
+        est.calibration_sigma = np.sqrt(np.diagonal(Sig[-1])[St.SCALE])
         est.calibration_cov = Sig[-1][8:11, 8:11].copy()
         est.calibration_cov_given = given
         kf = self.prob.kf
@@ -819,7 +817,7 @@ class FixedLagRunner(_Runner):
         # Window marginals are per variable: the cross-covariance of X, W and S
         # of one keyframe is not available, so pose sigma at the row time
         # ignores it (it is second order for the pose).
-        est.calibration_sigma = np.sqrt(np.diagonal(self.Sig[-1])[8:11])
+        est.calibration_sigma = np.sqrt(np.diagonal(self.Sig[-1])[St.SCALE])
         est.calibration_cov = self.Sig[-1][8:11, 8:11].copy()
         est.calibration_cov_given = given
         est.notes = [f"fixed-lag: {self.prob.kf.n} keyframes at {self.options.keyframe_hz:g} Hz, lag "

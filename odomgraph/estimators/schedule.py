@@ -40,5 +40,10 @@ class Schedule:
             raise OptionError(f"calibrate_until (--calibrate-until) must be seconds >= 0 or None, got {value_text(c)}")
         object.__setattr__(self, "hold", Hold(self.hold))
 
+    def switch_time(self, t_start: float) -> float | None:
+        """When calibration ends [s, the log's clock] for a log starting at
+        ``t_start``; None without a schedule. Every estimator uses this one."""
+        return None if self.calibrate_until is None else t_start + self.calibrate_until
+
     def calibrating(self, t_rel: float) -> bool:
         return self.calibrate_until is not None and t_rel < self.calibrate_until
