@@ -32,11 +32,25 @@ def machine() -> dict:
             "sources_dirty": START["dirty"]}
 
 
-def sources() -> dict[str, str]:
-    """{path: sha256[:16]} of every project source file this process has
-    imported: what the results depend on (benchmarks.stale compares them
-    with the files as they are now)."""
+def code_hash(path: Path) -> str:
+    """sha256[:16] of a Python file's code: its syntax tree without
+    docstrings, so that comments, docstrings and layout do not make a result
+    stale, and any change to what runs does."""
+    import ast
     import hashlib
+    tree = ast.parse(path.read_text(encoding="utf-8"))
+    for node in ast.walk(tree):
+        body = getattr(node, "body", None)
+        if (isinstance(body, list) and body and isinstance(body[0], ast.Expr)
+                and isinstance(body[0].value, ast.Constant) and isinstance(body[0].value.value, str)):
+            node.body = body[1:] or [ast.Pass()]
+    return hashlib.sha256(ast.dump(tree, include_attributes=False).encode()).hexdigest()[:16]
+
+
+def sources() -> dict[str, str]:
+    """{path: code_hash} of every project source file this process has
+    imported: what the results depend on (benchmarks.stale, and the suite's
+    tests/test_readme.py, compare them with the files as they are now)."""
     import sys
     root = RESULTS.parent.parent
     out = {}
@@ -52,7 +66,7 @@ def sources() -> dict[str, str]:
         if rel.parts[0] in ("odomgraph", "factors") and p.suffix == ".py":
             # A file edited while the benchmark ran is not what it ran: no hash.
             changed = p.stat().st_mtime > START["time"]
-            out[str(rel)] = "changed during the run" if changed else hashlib.sha256(p.read_bytes()).hexdigest()[:16]
+            out[str(rel)] = "changed during the run" if changed else code_hash(p)
     return dict(sorted(out.items()))
 
 
@@ -61,7 +75,7 @@ def save(name: str, data: dict, markdown: str) -> None:
     The JSON records the machine, the commit and the hashes of the sources
     the run imported."""
     RESULTS.mkdir(exist_ok=True)
-    data = {"machine": machine(), "sources": sources(), **data}
+    data = {"machine": machine(), "sources": sources(), "sources_kind": "code", **data}
     (RESULTS / f"{name}.json").write_text(json.dumps(data, indent=2) + "\n")
     (RESULTS / f"{name}.md").write_text(markdown + "\n")
     print(markdown)

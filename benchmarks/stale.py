@@ -1,17 +1,17 @@
 """Which results in benchmarks/results/ predate a change to the code they measure?
 
-Each results JSON written since issue 18 records the hash of every project
-source file its run imported (``_common.sources``). This lists, per results
+Each results JSON records the code hash (syntax tree without docstrings,
+``_common.code_hash``) of every project source file its run imported
+(``_common.sources``). This lists, per results
 file, the sources that changed since (or "no record" for older files).
 python -m benchmarks.stale  (exit 1 when any is stale)
 """
 from __future__ import annotations
 
-import hashlib
 import json
 import sys
 
-from benchmarks._common import RESULTS
+from benchmarks._common import RESULTS, code_hash
 
 
 def stale() -> dict[str, list[str]]:
@@ -19,14 +19,15 @@ def stale() -> dict[str, list[str]]:
     root = RESULTS.parent.parent
     out = {}
     for p in sorted(RESULTS.glob("*.json")):
-        rec = json.loads(p.read_text()).get("sources")
-        if rec is None:
-            out[p.name] = ["no record"]
+        data = json.loads(p.read_text())
+        rec = data.get("sources")
+        if rec is None or data.get("sources_kind") != "code":
+            out[p.name] = ["no record of the code it ran"]
             continue
         changed = []
         for rel, h in rec.items():
             f = root / rel
-            if not f.exists() or hashlib.sha256(f.read_bytes()).hexdigest()[:16] != h:
+            if not f.exists() or code_hash(f) != h:
                 changed.append(rel)
         if changed:
             out[p.name] = changed

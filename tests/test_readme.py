@@ -44,3 +44,11 @@ def test_the_python_api_example_runs_and_its_numbers_hold(tmp_path, monkeypatch)
     assert robot.track_width == pytest.approx(log.robot.track_width * true_track, rel=0.01)
     assert ns["report"]["held_out"]["calibrated"] < ns["report"]["held_out"]["nominal"]
     assert 0 < ns["batch_rms"] < 0.05
+
+
+def test_no_results_file_is_older_than_the_code_it_ran():
+    """Every results JSON records the code hash of each source its run
+    imported (benchmarks._common.sources); a change to any of them since
+    makes it stale: re-run it (python -m benchmarks.run_all --stale)."""
+    from benchmarks.stale import stale
+    assert stale() == {}, "stale results; run: python -m benchmarks.run_all --stale"

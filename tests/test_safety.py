@@ -98,7 +98,7 @@ def test_our_own_output_is_replaced_but_not_a_file_the_user_added(tmp_path, shor
     out = tmp_path / "est"
     assert run("estimate", short_log, "-o", out).exit_code == 0
     listed = json.loads((out / MARKER).read_text())["files"]
-    assert sorted(listed) == ["states.csv", "summary.json", "trajectory.tum"]
+    assert sorted(listed) == ["states.csv", "summary.json", "trajectory.tum", "truth.tum"]
     assert run("estimate", short_log, "--method", "batch", "-o", out).exit_code == 0      # ours: replaced
     assert json.loads((out / "summary.json").read_text())["method"] == "batch"
     (out / "my-plot.png").write_bytes(b"user data")
