@@ -15,7 +15,9 @@ a number is.
 """
 from __future__ import annotations
 
+import csv
 import json
+import math
 import re
 import sys
 from pathlib import Path
@@ -144,7 +146,891 @@ def real_data_honesty(results: Path) -> str:
             + "\n".join(tr) + f"\n\n{_source('real_data', d)}")
 
 
-BLOCKS = {f.__name__: f for f in (ekf_accuracy, ekf_throughput, smoother_accuracy, faults, real_data_honesty)}
+# --- helpers for the blocks below -------------------------------------------------------------------------
+
+def _sources(*pairs) -> str:
+    """One source line for a block that reads several results files: pairs of
+    (file name under benchmarks/results/, the JSON holding its machine)."""
+    parts = []
+    for name, d in pairs:
+        m = d.get("machine", {})
+        parts.append(f"`benchmarks/results/{name}`, commit {m.get('commit') or '?'}, {m.get('date', '?')[:10]}")
+    return "(" + "; ".join(parts) + ")"
+
+
+def _rng(values, fmt: str = "{:.2f}", unit: str = "") -> str:
+    """'lo–hi' over every value (one number when both ends print alike;
+    'lo to hi' when the numbers carry a sign)."""
+    vals = [v for v in values if v is not None and not math.isnan(v)]
+    lo, hi = fmt.format(min(vals)), fmt.format(max(vals))
+    sep = " to " if "+" in fmt or min(vals) < 0 else "–"
+    return (lo if lo == hi else f"{lo}{sep}{hi}") + unit
+
+
+def _minus(text: str) -> str:
+    """A typographic minus for signed numbers in prose."""
+    return text.replace("-", "−")
+
+
+def _near(values, v) -> int:
+    return min(range(len(values)), key=lambda i: abs(values[i] - v))
+
+
+def _pct(v: float, nd: int = 0) -> str:
+    return f"{100 * v:.{nd}f} %"
+
+
+MC_QUANTITIES = ("scale_left", "scale_right", "scale_track", "slip_left", "slip_right")
+
+
+class _Grid:
+    """One Monte-Carlo configuration's results.csv (benchmarks.montecarlo_study
+    copies it to results/montecarlo/): per estimator and quantity, the grid of
+    median RMS errors over (position-sensor σ, rate-sensor σ)."""
+
+    def __init__(self, results: Path, config: int):
+        self.config = config
+        with (results / "montecarlo" / f"config{config}_results.csv").open(newline="") as f:
+            rows = list(csv.DictReader(f))
+        self.x_axis, self.y_axis = list(rows[0])[2:4]
+        self.xs = sorted({float(r[self.x_axis]) for r in rows})
+        self.ys = sorted({float(r[self.y_axis]) for r in rows})
+        self._cell = {(r["estimator"], float(r[self.x_axis]), float(r[self.y_axis])): r for r in rows}
+
+    def value(self, est: str, q: str, i: int, j: int) -> float:
+        v = self._cell[(est, self.xs[i], self.ys[j])].get(f"median_rms_{q}", "")
+        try:
+            return float(v)
+        except ValueError:
+            return math.nan
+
+    def grid(self, est: str, q: str) -> list[list[float]]:
+        return [[self.value(est, q, i, j) for j in range(len(self.ys))] for i in range(len(self.xs))]
+
+    def ticks(self, est: str, i: int, j: int) -> float:
+        """Mean ticks-per-metre error of both wheels (as the paper's findings use)."""
+        return 0.5 * (self.value(est, "scale_left", i, j) + self.value(est, "scale_right", i, j))
+
+    def ratio(self, q: str, i: int, j: int) -> float:
+        return self.value("batch", q, i, j) / self.value("ekf", q, i, j)
+
+    def cells(self):
+        return [(i, j) for i in range(len(self.xs)) for j in range(len(self.ys))]
+
+    def failures(self) -> int:
+        return sum(int(r["failures"]) for r in self._cell.values())
+
+
+def _median(values) -> float:
+    v = sorted(x for x in values if not math.isnan(x))
+    n = len(v)
+    return math.nan if not n else (v[n // 2] if n % 2 else 0.5 * (v[n // 2 - 1] + v[n // 2]))
+
+
+def _mc_source(d: dict) -> str:
+    m = d.get("machine", {})
+    return (f"(`benchmarks/results/montecarlo_study.json` and `montecarlo/config{{1,2,3}}_results.csv`, commit "
+            f"{m.get('commit') or '?'}, {m.get('date', '?')[:10]})")
+
+
+def _above(values) -> str:
+    n = sum(v > 1 for v in values)
+    return f"above 1 at {n} of {len(values)}"
+
+
+def _mc_exceptions(results: Path) -> dict:
+    """The regions where the batch smoother is not better than the EKF
+    everywhere, each over every grid point in it, and the cells outside them."""
+    g2, g3 = _Grid(results, 2), _Grid(results, 3)
+    r1 = [(3, "scale_track", 0, j) for j in range(len(g3.ys))]                  # most precise ranges
+    r2 = [(2, "scale_track", 0, j) for j in range(len(g2.ys))]                  # best GPS + velocity sensor
+    r3 = [(2, q, i, 0) for i in range(1, len(g2.xs)) for q in ("scale_left", "scale_right")]  # 1 cm/s, poor GPS
+    grids = {c: _Grid(results, c) for c in (1, 2, 3)}
+    regions = set(r1) | set(r2) | set(r3)
+    total, worse, others = 0, 0, []
+    for c, g in grids.items():
+        for i, j in g.cells():
+            for q in MC_QUANTITIES:
+                total += 1
+                r = g.ratio(q, i, j)
+                if r > 1:
+                    worse += 1
+                    if (c, q, i, j) not in regions:
+                        others.append((c, q, g, i, j, r))
+
+    def ratios(cells):
+        return [grids[c].ratio(q, i, j) for c, q, i, j in cells]
+
+    def level(cells, est):
+        return [grids[c].value(est, q, i, j) * 100 for c, q, i, j in cells]
+    return {"grids": grids, "r1": r1, "r2": r2, "r3": r3, "total": total, "worse": worse, "others": others,
+            "ratios": ratios, "level": level}
+
+
+def _others_text(ex: dict) -> str:
+    if not ex["others"]:
+        return "none"
+    if len(ex["others"]) > 6:
+        return f"{len(ex['others'])} cells"
+    names = {"scale_left": "ticks/m left", "scale_right": "ticks/m right", "scale_track": "track",
+             "slip_left": "slip left", "slip_right": "slip right"}
+    return "; ".join(f"config {c}, {names[q]} at {g.x_axis.replace('_sigma', ' σ')} {g.xs[i]:g} and "
+                     f"{g.y_axis.replace('_sigma', ' σ')} {g.ys[j]:g}: {r:.2f}×" for c, q, g, i, j, r in ex["others"])
+
+
+# --- README.md ------------------------------------------------------------------------------------------------
+
+def smoother_scale(results: Path) -> str:
+    d = _load("smoother_scaling", results)
+    by = {(r["kind"], r["minutes"]): r for r in d["runs"]}
+    m = max(r["minutes"] for r in d["runs"] if r["kind"] == "batch")
+    e, b, i, f = (by[(k, m)] for k in ("ekf", "batch", "isam2", "fixed-lag"))
+    pm = min(r["minutes"] for r in d["runs"] if r["kind"].startswith("peer"))
+    pl, pi, ob, oi = by[("peer-lm", pm)], by[("peer-isam2", pm)], by[("batch", pm)], by[("isam2", pm)]
+    length = "one-hour" if m == 60 else f"{m:g}-minute"
+    unfinished = "" if pi.get("completed", True) else " (the peer stopped unfinished at its time limit)"
+    return (f"- **Scale, on a {length} log:**\n"
+            f"  - `batch` {b['wall_s']:.0f} s, {b['peak_rss_mb']:.0f} MB peak (the EKF alone takes "
+            f"{e['wall_s']:.0f} s);\n"
+            f"  - `isam2` {i['wall_s']:.0f} s, per-update time {i['first_ms']:.1f} ms over the first 10 % of "
+            f"updates and {i['last_ms']:.1f} ms over the last 10 %, {i['peak_rss_mb']:.0f} MB peak;\n"
+            f"  - `fixed-lag` {f['wall_s']:.0f} s, {f['peak_rss_mb']:.0f} MB peak.\n\n"
+            f"  On a {pm:g}-minute log, batch is {pl['wall_s'] / ob['wall_s']:.0f}× faster than GTSAM's own LM over "
+            f"the same graph built from plain `CustomFactor`s, and isam2 {pi['wall_s'] / oi['wall_s']:.1f}× faster "
+            f"than one ISAM2 over them{unfinished}.\n\n  " + _source("smoother_scaling", d))
+
+
+def wheel_speed_units(results: Path) -> str:
+    sh = _load("speed_shrinkage", results)
+    d = sh["results"]
+    gps = sorted({r["gps_sigma"] for r in d.values()})
+    g = gps[_near(gps, 0.34)]
+    ekf, plain = d[f"{g:g}/ekf"], d[f"{g:g}/batch, plain walks"]
+    z = [abs(m) / s for r in (ekf, plain) for m, s in zip(r["mean_pct"], r["spread_pct"])]
+    cut = [1 - abs(b) / abs(p) for s in gps
+           for b, p in zip(d[f"{s:g}/batch"]["mean_pct"], d[f"{s:g}/batch, plain walks"]["mean_pct"])]
+    return ("- **Random walks in wheel-speed units (batch, with a calibration window).**\n"
+            "  A Gaussian walk on the speeds is cheapest when the speeds are small, and\n"
+            "  the encoder model lets larger scale factors pay for smaller speeds. With\n"
+            "  GPS as the only speed reference, both the EKF and a plain smoother\n"
+            f"  overestimate ticks per metre and underestimate track width: at {g:g} m GPS\n"
+            f"  by {_rng([abs(v) for v in ekf['mean_pct']])} % (EKF) and "
+            f"{_rng([abs(v) for v in plain['mean_pct']])} % (plain smoother),\n"
+            f"  {_rng(z, '{:.1f}')} times their spread over seeds. The batch smoother takes the\n"
+            "  v and slip steps as scale × speed, which no such trade can cheapen. That\n"
+            f"  removes {_rng([100 * c for c in cut], '{:.0f}')} % of the plain smoother's bias (each scale factor, "
+            f"GPS σ {gps[0]:g}–{gps[-1]:g} m);\n"
+            "  the rest is open ([benchmarks](benchmarks/README.md), \"Speed shrinkage\"). Slip-only\n"
+            "  schedules keep the plain walks: with nothing to anchor the scale factors,\n"
+            "  one can shrink to zero to escape the priors. isam2 and fixed-lag keep\n"
+            "  them too (GTSAM built-ins). `SmootherOptions(wheel_speed_units=False)`\n"
+            "  turns it off.\n\n  " + _source("speed_shrinkage", sh))
+
+
+def montecarlo_wall(results: Path) -> str:
+    d = _load("montecarlo_study", results)
+    cfg = d["configs"]
+    walls = ", ".join(f"{k.removeprefix('config')}: {v['wall_s'] / 60:.1f} min" for k, v in cfg.items())
+    cpus = d.get("machine", {}).get("cpus")
+    return (f"The full study, {len(cfg)} × {d['grid'] ** 2} points × {d['runs']} runs for both estimators, took "
+            f"**{d['total_wall_s'] / 60:.1f} min** on this {cpus}-core machine (configuration {walls}; "
+            f"[benchmarks](benchmarks/README.md)).\n\n" + _source("montecarlo_study", d))
+
+
+def montecarlo_findings(results: Path) -> str:
+    d = _load("montecarlo_study", results)
+    cfg = d["configs"]
+    g1, g2 = _Grid(results, 1), _Grid(results, 2)
+    c1, c2 = cfg["config1"]["grid_median_track_error"]["ekf"], cfg["config2"]["grid_median_track_error"]["ekf"]
+    fnd = {("track" if "track" in f["claim"] else "ticks"): f for f in cfg["config1"]["findings"]}
+    verdict = {True: "Reproduces", False: "Does not reproduce", None: "The grid cannot tell"}
+    # config 2: the track error with the most precise velocity sensor, at every GPS σ
+    v2 = [g2.value("ekf", "scale_track", i, 0) for i in range(len(g2.xs))]
+    # config 1: grid-column medians of the track error against gyro σ
+    col = [_median([g1.value("ekf", "scale_track", i, j) for i in range(len(g1.xs))]) for j in range(len(g1.ys))]
+    k = _near(g1.ys, 0.05)
+    # config 1: grid-row medians of the mean ticks/m error against GPS σ
+    row = [_median([g1.ticks("ekf", i, j) for j in range(len(g1.ys))]) for i in range(len(g1.xs))]
+    ticks_gain = row[-1] / row[0]
+    ratio = {q: [c["median_ratio_smoother_over_ekf"][q] for c in cfg.values()] for q in MC_QUANTITIES}
+    better = all(v < 1 for vs in ratio.values() for v in vs)
+    ex = _mc_exceptions(results)
+    r1, r2, r3 = (ex["ratios"](ex[k_]) for k_ in ("r1", "r2", "r3"))
+    g3 = ex["grids"][3]
+    track_verdict = ("Does not reproduce as a knee." if fnd["track"]["holds"] is False
+                     else verdict[fnd["track"]["holds"]] + ".")
+    ticks_verdict = (f"Does not reproduce: ours improves {ticks_gain:.0f}×" if fnd["ticks"]["holds"] is False
+                     else f"{verdict[fnd['ticks']['holds']]}: ours improves {ticks_gain:.1f}×")
+    return (
+        "**The paper's findings on our numbers** (EKF; `tests/test_montecarlo.py`\n"
+        "asserts what we found):\n\n"
+        f"- *Config 2 beats config 1 on track width.* **{verdict[c2 < c1]}**: the grid\n"
+        f"  median is {100 * c2:.1f} % against {100 * c1:.1f} %. With a {g2.ys[0]:g} velocity sensor it is "
+        f"{_rng([100 * v for v in v2])} %\n"
+        f"  at every GPS σ of the grid ({g2.xs[0]:g}–{g2.xs[-1]:g} m). The paper also says GPS hardly matters "
+        "there.\n"
+        "- *Track width degrades once gyro σ passes about 0.05 rad/s (config 1).*\n"
+        f"  **{track_verdict}** Track error grows with gyro noise\n"
+        f"  ({100 * col[0]:.1f} % at {g1.ys[0]:g}, {100 * col[k]:.1f} % at {g1.ys[k]:g}, {100 * col[-1]:.1f} % at "
+        f"{g1.ys[-1]:g} rad/s, grid-column\n"
+        "  medians), but it does so gradually and only where GPS is poor. With\n"
+        f"  {g1.xs[0]:g} m GPS at 10 Hz, the 0.45 m lever arm gives heading at every fix and\n"
+        f"  the gyro barely matters ({100 * g1.value('ekf', 'scale_track', 0, 0):.2f} % at {g1.ys[0]:g} rad/s "
+        f"against {100 * g1.value('ekf', 'scale_track', 0, len(g1.ys) - 1):.2f} % at {g1.ys[-1]:g}).\n"
+        f"- *{g1.xs[-1]:g} m → {g1.xs[0]:g} m GPS improves ticks per metre about 2× (config 1).*\n"
+        f"  **{ticks_verdict}** ({100 * row[-1]:.1f} % against {100 * row[0]:.2f} %).\n"
+        "  Within a 20 s calibration window the ticks-per-metre estimate is limited\n"
+        "  by GPS: about 15 m of travel seen through 1.5 m noise. The error should\n"
+        f"  scale with GPS σ, and it does. Our {100 * row[-1]:.0f} % at {g1.xs[-1]:g} m is near the paper's\n"
+        "  other statement that ticks per metre stays \"below approximately 5–10 %\".\n"
+        "  The 2× would need a much longer calibration window or a GPS-independent\n"
+        "  velocity reference.\n"
+        f"- The batch smoother is {'better than' if better else 'not everywhere better than'} the EKF on slip "
+        f"({_rng(ratio['slip_left'] + ratio['slip_right'])}×), ticks\n"
+        f"  per metre ({_rng(ratio['scale_left'] + ratio['scale_right'])}×) and track width "
+        f"({_rng(ratio['scale_track'])}×) across the grids\n"
+        "  (medians over grid points). Much of that margin at poor GPS is the\n"
+        "  EKF's speed-shrinkage bias, which the smoother's wheel-speed units\n"
+        f"  reduce. Its median is above the EKF's in {ex['worse']} of {ex['total']} cells (configuration, grid "
+        "point,\n"
+        f"  quantity): track width with {100 * g3.xs[0]:g} cm ranges ({_rng(r1)}×, {_above(r1)} points) or\n"
+        f"  with {g2.xs[0]:g} m GPS and a velocity sensor ({_rng(r2)}×, {_above(r2)}), and ticks per metre with a\n"
+        f"  {100 * g2.ys[0]:g} cm/s velocity sensor under GPS of {g2.xs[1]:g} m or worse ({_rng(r3)}×, "
+        f"{_above(r3)}, {_rng(ex['level'](ex['r3'], 'batch'))} %),\n"
+        f"  which the benchmarks README takes apart; elsewhere: {_others_text(ex)}.\n\n" + _mc_source(d))
+
+
+def optiodom_transfer(results: Path) -> str:
+    d = _load("real_data", results)
+    dc, df = d["dr_circular"], d["dr_free"]
+    share = [dc["share_of_oracle_improvement"], df["share_of_oracle_improvement"]]
+    two = [dc["share_2hz_fixes"], df["share_2hz_fixes"]]
+    curve = d["square_calibration"]["process_noise"]["held_out_rms_m"]
+    best = min(range(len(curve)), key=lambda n: curve[n]["rms_m"])
+    lo = hi = best   # the run of multiples around the best within 10 % of its held-out error
+    while lo > 0 and curve[lo - 1]["rms_m"] <= 1.1 * curve[best]["rms_m"]:
+        lo -= 1
+    while hi < len(curve) - 1 and curve[hi + 1]["rms_m"] <= 1.1 * curve[best]["rms_m"]:
+        hi += 1
+    flat = [c["rms_m"] * 1e3 for c in curve[lo:hi + 1]]
+    outside = [c for n, c in enumerate(curve) if n < lo or n > hi]
+    path = d["square_why"]["whole_path_fit"][2]
+    oracle = d["square_calibration"]["oracle"][2]
+    path_shares = d["square_why"]["variants"]["(no smoother) square's whole-path dead-reckoning fit"]["shares"]
+    transfer = "does not transfer at all" if all(s < 0 for s in path_shares) else "transfers poorly"
+    return ("- **OptiOdom calibration transfer is fragile.** With the tuned process\n"
+            "  noise, calibrating on the square run (1 Hz mocap fixes) takes "
+            f"{_pct(share[0])} and\n  {_pct(share[1])} of the oracle's improvement on the `circular` and `free` "
+            "runs (the\n  acceptance test wants 80 %). Three things in `benchmarks/results/real_data.md` say\n"
+            "  this margin is thin:\n"
+            f"  - the held-out error stays within {_rng(flat, '{:.2f}')} mm from ×{curve[lo]['factor']:g} to "
+            f"×{curve[hi]['factor']:g} the default noise\n"
+            "    (" + ", ".join(f"×{c['factor']:g}: {1e3 * c['rms_m']:.2f} mm" for c in outside)
+            + "), so the choice is weakly determined;\n"
+            f"  - with 2 Hz fixes the same procedure reaches only {_pct(two[0])} and {_pct(two[1])};\n"
+            f"  - the square run's own best dead-reckoning fit (track {path:.3f}) {transfer}\n"
+            f"    ({_minus(f'{100 * path_shares[0]:.0f} % and {100 * path_shares[1]:.0f} %')}), while the oracle for "
+            f"the other two runs wants {oracle:.3f}.\n"
+            f"    The effective track differs by about {100 * abs(oracle / path - 1):.0f} % between a run of in-place\n"
+            "    pivots and runs of curves, and a single track scale cannot hold both.\n\n  "
+            + _source("real_data", d))
+
+
+def librsf_limits(results: Path) -> str:
+    d = _load("real_data", results)
+    rows = {k.rsplit(" / ", 1)[1]: r for k, r in d["honesty"].items() if k.startswith("librsf")}
+    done = [m for m, r in rows.items() if r["finished"]]
+    cov = [v for r in rows.values() if r["finished"] and r.get("coverage_3sigma")
+           for v in (r["coverage_3sigma"]["x"], r["coverage_3sigma"]["y"])]
+    finish = ("Every estimator finishes there" if len(done) == len(rows)
+              else f"{len(done)} of {len(rows)} estimators finish there")
+    status = ", ".join(f"{m} {r['status'] if r['finished'] else 'stopped'}" for m, r in rows.items())
+    return ("- **Nominal parameters far off.** On the real libRSF cut the wheel speeds\n"
+            "  and the track are far from their nominal values, against a 5 % scale\n"
+            f"  prior (the smoothers' warnings give the scale factors). {finish} ({status}),\n"
+            "  but the answer moves with the start, and the ±3σ position bands cover\n"
+            f"  the truth only {_rng([100 * c for c in cov], '{:.0f}')} % of the time (x and y, every estimator): the "
+            "priors are\n"
+            "  wrong, and nothing yet estimates how wrong. With its `[initial]` pose the batch\n"
+            f"  smoother's RMS error there is {d['librsf_batch']:.3f} m, against {d['librsf_dead_reckoning']:.3f} m "
+            "for dead reckoning.\n"
+            "  Run `calibrate` first, or widen `[process] initial_scale_sigma`.\n\n  " + _source("real_data", d))
+
+
+def faults_still(results: Path) -> str:
+    d = _load("faults", results)
+    rows = [r for r in d["rows"] if r["case"] == "still" and r["finished"]]
+    ekf = min((r for r in rows if r["method"] == "ekf"), key=lambda r: r["coverage_3sigma_xy"])
+    smooth = [r["coverage_3sigma_xy"] for r in rows if r["method"] != "ekf"]
+    flag = ("unflagged (status `ok`)" if ekf["status"] == "ok" and not ekf["failed_checks"]
+            else f"with status `{ekf['status']}`")
+    cover = ("The smoothers cover it" if min(smooth) >= 0.95 else "The smoothers do not cover it either")
+    return ("- **The EKF standing still with a lever arm** and no `[initial]` heading\n"
+            "  takes the heading for observable through the lever arm's Jacobian: on the\n"
+            f"  `still` fault (seed {ekf['seed']}) its heading drifts with a small σ, and the worse of x\n"
+            f"  and y lies inside ±3σ only {_pct(ekf['coverage_3sigma_xy'])} of the time, {flag}.\n"
+            f"  {cover} (the worse of x and y inside ±3σ {_rng([100 * c for c in smooth], '{:.0f}')} % of the "
+            "time;\n  `benchmarks/results/faults.md`).\n\n  "
+            + _source("faults", d))
+
+
+def range_bias(results: Path) -> str:
+    d = _load("real_data", results)
+    rb = d["librsf_range_bias"].values()
+    est = [v["value"] for v in rb]
+    ref = [v["truth_mean_residual"] for v in rb]
+    a, b = d["librsf_batch"], d["librsf_batch, range bias per beacon"]
+    move = "drops" if b < a else ("rises" if b > a else "stays")
+    return ("- `--range-bias` (batch) estimates a constant bias per beacon, with a 0.5 m\n"
+            "  prior, and reports each with its σ in `summary.json` (`range_bias`). On the\n"
+            f"  real libRSF UWB cut the biases come out {_minus(_rng(est, '{:+.2f}'))} m, against the ground\n"
+            f"  truth's mean residuals of {_minus(_rng(ref, '{:+.2f}'))} m, and the error {move}\n"
+            f"  ({b:.3f} m against {a:.3f} m without). `compare --range-bias` gives it to the batch\n"
+            "  smoother and runs the others without; range residuals in the report\n"
+            "  subtract each estimator's own biases.\n\n  " + _source("real_data", d))
+
+
+# --- benchmarks/README.md -------------------------------------------------------------------------------------
+
+def ekf_accuracy_table(results: Path) -> str:
+    d = _load("ekf_accuracy", results)
+    rows = []
+    for name in ("paper", "yard"):
+        s = d[name]
+        cov = {k: s["coverage_min"][k] for k in ("x", "y", "slip_left", "slip_right", "scale_left", "scale_right",
+                                                  "scale_track")}
+        rows.append(
+            f"| {name} | {s['seeds']} | {100 * max(s['scale_rel_error_max'][:2]):.2f} | "
+            f"{100 * s['scale_rel_error_max'][2]:.2f} | {s['slip_rms_pooled'][0]:.4f} / {s['slip_rms_pooled'][1]:.4f} | "
+            f"{s['slip_rms_worst_seed'][0]:.4f} / {s['slip_rms_worst_seed'][1]:.4f} | {100 * min(cov.values()):.1f} "
+            f"({min(cov, key=cov.get)}) |")
+    return "\n".join([
+        "| scenario | seeds | worst ticks/m error % | worst track error % | slip RMS L / R (all rows) m/s "
+        "| worst seed slip RMS L / R | worst 3σ coverage % (state) |",
+        "|---|---|---|---|---|---|---|", *rows, "", _source("ekf_accuracy", d)])
+
+
+def ekf_throughput_table(results: Path) -> str:
+    d = _load("ekf_throughput", results)
+    rows = [f"| {k} | {r['updates']} | {r['ours_updates_per_s']:.0f} | {r['filterpy_updates_per_s']:.0f} | "
+            f"{r['speedup_best']:.2f}× (median pair {r['speedup_median_pairwise']:.2f}×) | "
+            f"{r['max_abs_state_difference']:.1e} |"
+            for k, r in d.items() if isinstance(r, dict) and "updates" in r]
+    return "\n".join([
+        "| log | updates | odomgraph EKF updates/s | FilterPy EKF updates/s | speed-up | max state difference |",
+        "|---|---|---|---|---|---|", *rows, "",
+        "Best of the interleaved runs each (`--repeats`); 'updates' counts measurement updates (pseudo-updates "
+        "excluded).", "", _source("ekf_throughput", d)])
+
+
+SMOOTHER_STATES = ("x", "y", "slip_left", "slip_right", "scale_left", "scale_right", "scale_track")
+SMOOTHERS = ("ekf", "batch", "isam2", "isam2 online", "fixed-lag")
+
+
+def smoother_accuracy_table(results: Path) -> str:
+    d = _load("smoother_accuracy", results)
+    ekf = d["ekf"]
+    rows = []
+    for name in SMOOTHERS:
+        s = d[name]
+        cov = min(s["coverage_min"][k] for k in SMOOTHER_STATES)
+        rs = "/".join(f"{a / b:.2f}" for a, b in zip(s["scale_rel_error_rms"], ekf["scale_rel_error_rms"]))
+        rp = "/".join(f"{a / b:.2f}" for a, b in zip(s["slip_rms_pooled"], ekf["slip_rms_pooled"]))
+        rows.append(f"| {name} | {s['rms_position']:.4f} | "
+                    + " / ".join(f"{100 * v:.3f}" for v in s["scale_rel_error_rms"]) + f" | {rs} | "
+                    + f"{s['slip_rms_pooled'][0]:.4f} / {s['slip_rms_pooled'][1]:.4f} | {rp} | {100 * cov:.1f} |")
+    return "\n".join([
+        f"Paper scenario, {ekf['seeds']} seeds, identical logs for every estimator.", "",
+        "| estimator | RMS position m | scale error RMS % (L / R / track) | vs EKF | slip RMS L / R m/s | vs EKF "
+        "| worst 3σ coverage % |",
+        "|---|---|---|---|---|---|---|", *rows, "",
+        "Targets: batch scale ≤ 0.5× and slip ≤ 0.7× the EKF; isam2 online ≤ 1× the EKF; coverage ≥ 95 % "
+        "(x, y, slips, scale factors, worst seed).", "", _source("smoother_accuracy", d)])
+
+
+def smoother_accuracy_findings(results: Path) -> str:
+    d = _load("smoother_accuracy", results)
+    e, b, on, tf = d["ekf"], d["batch"], d["isam2 online"], d["track_floor"]
+    rel = [x / y for x, y in zip(b["scale_rel_error_rms"], e["scale_rel_error_rms"])]
+    slip = [x / y for x, y in zip(b["slip_rms_pooled"], e["slip_rms_pooled"])]
+    oslip = [x / y for x, y in zip(on["slip_rms_pooled"], e["slip_rms_pooled"])]
+    otrack = on["scale_rel_error_rms"][2] / e["scale_rel_error_rms"][2]
+    te, tb = e["scale_rel_error_rms"][2], b["scale_rel_error_rms"][2]
+    target = 0.5 * te
+    meets = max(rel[:2]) <= 0.5 and max(slip) <= 0.7
+    online = max(oslip + [otrack]) <= 1
+    reach = ("0.5× is out of reach for any estimator\n  on this scenario" if target < min(tf["same_seeds_rms"][0],
+                                                                                     tf["expected_rms"][0])
+             else "0.5× is within the oracle's reach on this scenario")
+    n = e["seeds"]
+    floor = "\n".join(
+        f"  | {label} | {100 * tf['same_seeds_rms'][k]:.3f} | {tf['same_seeds_rms'][k] / te:.2f} | "
+        f"{100 * tf['expected_rms'][k]:.3f} | {100 * tf['crlb'][k]:.3f} |"
+        for k, label in enumerate(("oracle, whole log", "oracle, calibration window only (what the EKF uses)")))
+    return (
+        f"- **Batch {'meets' if meets else 'misses'} the targets on ticks per metre and slip.** Ticks-per-metre\n"
+        f"  errors are {_rng(rel[:2])}× the EKF's (≤ 0.5), slip RMS {_rng(slip)}× (≤ 0.7), and the\n"
+        f"  iSAM2 online estimate is {'better than' if online else 'not everywhere better than'} the EKF "
+        f"({_rng(oslip)}× on slip, {otrack:.2f}×\n  on track).\n"
+        f"- **Track width: {rel[2]:.2f}× the EKF, and {reach}.** The floor comes from `odomgraph.analysis.bounds`: "
+        "an\n"
+        "  oracle that knows the true heading at every encoder sample, which\n"
+        "  intervals are slip-free, and both wheel scale factors. Only encoder noise\n"
+        "  (eq. 41) is left, and weighted least squares is its efficient estimator:\n\n"
+        f"  | oracle | track RMS %, same {n} seeds | vs EKF | expected RMS % (200 seeds) | Cramér–Rao σ % |\n"
+        "  |---|---|---|---|---|\n" + floor + "\n\n"
+        "  - The floor is set by the encoders. Track width is seen only as the wheels'\n"
+        "    travel difference against the heading change. At eq. 41's 0.005 +\n"
+        "    0.01 |v| m/s per 20 Hz sample, the integrated wheel difference over the\n"
+        "    log's turning (two 4.2 rad pivots, seven π turns) leaves a Cramér–Rao σ of\n"
+        f"    {100 * tf['crlb'][0]:.3f} %. Better GPS or gyro cannot lower it.\n"
+        f"  - On the same {n} seeds the oracle is {tf['same_seeds_rms'][0] / te:.2f}× the EKF; the batch smoother\n"
+        f"    ({100 * tb:.3f} %) is {tb / tf['same_seeds_rms'][0]:.2f}× the oracle. The target needs "
+        f"{100 * target:.3f} %; the\n"
+        f"    oracle's expected RMS is {100 * tf['expected_rms'][0]:.3f} %.\n"
+        "  - Both estimators sit near their own floor (the EKF "
+        f"{te / tf['same_seeds_rms'][1]:.2f}× the window-only oracle, the\n"
+        f"    smoother {tb / tf['same_seeds_rms'][0]:.2f}× the whole-log one). The EKF holds the scale\n"
+        "    factors after the 20 s window (the paper's schedule), so its floor is\n"
+        "    the window-only row. The smoother keeps calibrating through every\n"
+        "    slip-free turn after it.\n"
+        "  - `tests/test_bounds.py` checks that the oracle is unbiased and that its\n"
+        "    Cramér–Rao σ matches its scatter over 40 seeds.\n\n  " + _source("smoother_accuracy", d))
+
+
+def track_bias(results: Path) -> str:
+    d = _load("track_bias", results)
+    r = d["results"]
+    rows = "\n".join(f"  | {k} | " + " | ".join(f"{m:+.3f} ± {s:.3f}" for m, s in zip(v["mean_pct"], v["spread_pct"]))
+                     + " |" for k, v in r.items())
+    quiet, q20 = r["quiet"], r["quiet, 20 Hz keyframes"]
+    noisy, every, n20 = r["noisy, default"], r["quiet + every sensor's noise"], r["noisy, 20 Hz keyframes"]
+    track_mean = noisy["mean_pct"][2]
+    return (
+        "- **Where the remaining scale errors come from** (`python -m benchmarks.track_bias`,\n"
+        "  `results/track_bias.md`):\n\n"
+        "  Mean ± spread over seeds of the final error, %. Quiet: every sensor nearly noise-free, no slip, no gyro "
+        "bias.\n\n"
+        "  | variant | ticks/m L | ticks/m R | track |\n"
+        "  |---|---|---|---|\n" + rows + "\n\n"
+        f"  - With every sensor nearly noise-free, the track spreads {quiet['spread_pct'][2]:.3f} % between\n"
+        "    seeds that differ only in sensor timing. That is what is left of the\n"
+        f"    5 Hz discretisation ({q20['spread_pct'][2]:.3f} % at 20 Hz keyframes).\n"
+        "  - Encoder noise alone (quiet + encoder noise) gives a track RMS of "
+        f"{r['quiet + encoder noise']['rms_pct'][2]:.3f} %,\n"
+        "    near the oracle's floor above: what remains is the information limit, not model\n"
+        "    error.\n"
+        f"  - A small ticks-per-metre bias remains: {_minus(_rng(noisy['mean_pct'][:2], '{:+.3f}'))} % with\n"
+        f"    everything noisy, {_minus(_rng(every['mean_pct'][:2], '{:+.3f}'))} % with sensor noise but no slip "
+        "events\n"
+        f"    (quiet + every sensor's noise). It changes with the keyframe rate "
+        f"({_minus(_rng(n20['mean_pct'][:2], '{:+.3f}'))} %\n"
+        f"    at 20 Hz). Track has a mean of {_minus(f'{track_mean:+.3f}')} % over these "
+        f"{d['seeds']} seeds. Part of it is the speed shrinkage below, which wheel-speed\n"
+        "    units reduce but do not remove. At 20 Hz part of it is the sparse-slip Cauchy prior: each\n"
+        "    interval's prior pulls the slip estimate during slip events towards\n"
+        "    zero, a wheel that seems to slip less must have more ticks per metre,\n"
+        "    and 20 Hz has 4× as many pulls.\n"
+        "    - Prototypes tried and not kept (code not kept): weighting each\n"
+        "      interval's slip prior by its duration (it reduced the 20 Hz bias but\n"
+        "      did not remove it), a Geman–McClure slip prior (barely smaller bias at\n"
+        "      5 Hz, larger spread), and encoder σ from smoothed rather than measured\n"
+        "      speeds (no change).\n"
+        "    - It is well within the targets, so the default stays.\n\n  " + _source("track_bias", d))
+
+
+def smoother_consistency(results: Path) -> str:
+    d = _load("smoother_accuracy", results)
+    cov = min(d[m]["coverage_min"][k] for m in SMOOTHERS for k in SMOOTHER_STATES)
+    head = "Every estimator is consistent" if cov >= 0.95 else "Not every estimator is consistent"
+    return (f"- **{head} (≥ {100 * cov:.1f} % inside ±3σ on the worst seed).**\n"
+            "  iSAM2 needed a full back-substitution (`calculateBestEstimate`) at the end.\n"
+            "  With the default wildfire threshold (1e-3), older keyframes kept stale\n"
+            "  scale copies, and one seed fell below the 95 % target.\n\n  " + _source("smoother_accuracy", d))
+
+
+def speed_shrinkage(results: Path) -> str:
+    sh = _load("speed_shrinkage", results)
+    d = sh["results"]
+    gps = sorted({r["gps_sigma"] for r in d.values()})
+    rows = [f"| {r['gps_sigma']:g} | {r['variant']} | "
+            + " | ".join(f"{m:+.2f} ± {s:.2f}" for m, s in zip(r["mean_pct"], r["spread_pct"])) + " |"
+            for r in d.values()]
+    g = gps[_near(gps, 0.34)]
+    ekf = {s: d[f"{s:g}/ekf"]["mean_pct"] for s in gps}
+    ticks, track = ekf[g][:2], ekf[g][2]
+    slope = math.log(abs(ekf[gps[-1]][0]) / abs(ekf[gps[0]][0])) / math.log(gps[-1] / gps[0])
+    cut = [1 - abs(b) / abs(p) for s in gps
+           for b, p in zip(d[f"{s:g}/batch"]["mean_pct"], d[f"{s:g}/batch, plain walks"]["mean_pct"])]
+
+    def before_after(s):
+        p, b = d[f"{s:g}/batch, plain walks"]["mean_pct"], d[f"{s:g}/batch"]["mean_pct"]
+        return (f"{s:g} m: {_rng([abs(v) for v in p])} → {_rng([abs(v) for v in b])} %")
+    return "\n".join([
+        f"Mean ± spread over seeds of the final error, % (Monte-Carlo configuration 1, {sh['seeds']} seeds per "
+        "point).", "",
+        "| GPS σ m | estimator | ticks/m L | ticks/m R | track |", "|---|---|---|---|---|", *rows, "",
+        "- **Both estimators overestimate ticks per metre and underestimate track\n"
+        "  width when GPS is poor, by several times their own spread.** At "
+        f"{g:g} m\n  GPS the EKF is {_rng(ticks, '{:+.1f}')} % and {_minus(f'{track:+.1f}')} %, and at {gps[-1]:g} m "
+        f"{_rng(ekf[gps[-1]][:2], '{:+.1f}')} %. The errors of the\n"
+        "  two wheels and the track move together, so the estimated speeds are\n"
+        "  shrunk while the headings stay right.",
+        "- **The cause is a Gaussian random walk on the speeds.** It is cheapest when\n"
+        "  every speed change is small, and the encoder model (k (v + slip) =\n"
+        "  measured) lets larger scale factors pay for smaller speeds. The bias is\n"
+        "  then about (the walk's cost of the manoeuvres) / (GPS information on the\n"
+        f"  path's size). For the 20 s calibration window at {g:g} m GPS a rough\n"
+        f"  count of both comes out near the measured {_rng(ticks, '{:.1f}')} %, and the EKF's bias grows\n"
+        f"  about as GPS σ^{slope:.1f} from {gps[0]:g} to {gps[-1]:g} m.",
+        "- **The batch smoother now takes the v and slip random walks in\n"
+        "  wheel-speed units** (scale × speed, relative to the initial scales). Then\n"
+        f"  no prior pays for that trade. This cuts the bias by {_rng([100 * c for c in cut], '{:.0f}')} % "
+        "(every GPS σ\n"
+        f"  and scale factor; {before_after(g)}; {before_after(gps[-1])}). On the paper scenario it\n"
+        "  improved ticks/m RMS and cost a little track RMS (before and after: this\n"
+        "  file's git history; the numbers now: \"Smoother accuracy\" above).\n"
+        "  - ω keeps its plain walk. Heading sensors pin the scale of ω, and a\n"
+        "    first version that also took ω as scale_track × ω gave a larger track\n"
+        "    bias with a noisy gyro and good GPS (the Monte-Carlo grid showed it).\n"
+        "  - Only with a calibration window. Without one (slip-only schedules)\n"
+        "    nothing anchors the scale factors, and a prototype that used wheel-speed\n"
+        "    units everywhere let the real libRSF log's track scale shrink to zero\n"
+        "    to escape the priors. Slip-only schedules keep the plain walks, and\n"
+        "    a test checks that they are untouched.\n"
+        "  - isam2 and fixed-lag keep the plain walks (GTSAM built-in factors). So\n"
+        "    does the EKF, whose process noise is the same walk.", "",
+        "  " + _source("speed_shrinkage", sh)])
+
+
+def smoother_scaling_table(results: Path) -> str:
+    d = _load("smoother_scaling", results)
+    runs = d["runs"]
+    by = {(r["kind"], r["minutes"]): r for r in runs}
+    lines = ["| minutes | method | wall s | × real time | per-update ms first 10 % → last 10 % | peak MB |",
+             "|---|---|---|---|---|---|"]
+    for r in runs:
+        per = (f"{r['first_ms']:.2f} → {r['last_ms']:.2f} ({r['last_ms'] / r['first_ms']:.2f}×)"
+               if "first_ms" in r else "")
+        lines.append(f"| {r['minutes']:g} | {r['kind']} | {r['wall_s']:.1f} | {60 * r['minutes'] / r['wall_s']:.0f} | "
+                     f"{per} | {r['peak_rss_mb']:.0f} |")
+    pm = min(r["minutes"] for r in runs if r["kind"].startswith("peer"))
+    ob, oi, pl, pi = (by[(k, pm)] for k in ("batch", "isam2", "peer-lm", "peer-isam2"))
+    lines += ["", f"Peer on the {pm:g}-minute log: straightforward LM {pl['wall_s']:.1f} s vs batch "
+              f"{ob['wall_s']:.1f} s (**{pl['wall_s'] / ob['wall_s']:.1f}×** faster); straightforward ISAM2 "
+              f"{pi['wall_s']:.1f} s{'' if pi.get('completed', True) else ' (stopped at the limit, unfinished)'} "
+              f"vs isam2 {oi['wall_s']:.1f} s (**{pi['wall_s'] / oi['wall_s']:.1f}×**).", ""]
+    b, i = by[("batch", 60)], by[("isam2", 60)]
+    ok = lambda c: "✓" if c else "✗"   # noqa: E731
+    minutes = sorted({r["minutes"] for r in runs if r["kind"] == "ekf"})
+    per_min = "; ".join(f"{k} " + " / ".join(f"{by[(k, m)]['wall_s'] / m:.2f}" for m in minutes)
+                        for k in ("ekf", "batch", "isam2", "fixed-lag"))
+    lines += [
+        "- **Against the issue's targets for one hour:**",
+        f"  - batch ≤ 60 s {ok(b['wall_s'] <= 60)} ({b['wall_s']:.1f} s);",
+        f"  - isam2 ≤ 120 s and ≥ 30× real time {ok(i['wall_s'] <= 120 and 3600 / i['wall_s'] >= 30)} "
+        f"({i['wall_s']:.1f} s, {3600 / i['wall_s']:.0f}×);",
+        f"  - isam2's last-10 % update time within 1.5× of the first 10 % {ok(i['last_ms'] <= 1.5 * i['first_ms'])} "
+        f"({i['last_ms'] / i['first_ms']:.2f}×);",
+        "  - total time against log length (plot), as seconds per log minute for "
+        + " / ".join(f"{m:g}" for m in minutes) + f" minutes: {per_min}. Batch went "
+        f"{by[('batch', minutes[-2])]['wall_s']:.1f} → {b['wall_s']:.1f} s from {minutes[-2]:g} to {minutes[-1]:g} "
+        "minutes. Its elimination is linear per iteration, but the number of Gauss–Newton iterations depends on the "
+        "log, and the script does not record it. Left to check.", "",
+        "  " + _source("smoother_scaling", d)]
+    return "\n".join(lines)
+
+
+def smoother_scaling_memory_peer(results: Path) -> str:
+    d = _load("smoother_scaling", results)
+    by = {(r["kind"], r["minutes"]): r for r in d["runs"]}
+    b, i = by[("batch", 60)], by[("isam2", 60)]
+    pm = min(r["minutes"] for r in d["runs"] if r["kind"].startswith("peer"))
+    ob, oi, pl, pi = (by[(k, pm)] for k in ("batch", "isam2", "peer-lm", "peer-isam2"))
+    return (
+        "- **Segment memory, two designs measured.** At first every closed segment's\n"
+        "  ISAM2 was kept for the backward pass, so memory grew with every segment\n"
+        "  (the numbers are in this file's git history). Now a closed segment keeps only its estimate and the\n"
+        "  hand-over marginal. The backward pass relinearises it with the same numpy\n"
+        "  code and solves one Gauss–Newton step by reverse-time elimination, which\n"
+        f"  is what ISAM2's update did. The hour peaks at {i['peak_rss_mb']:.0f} MB, against the batch\n"
+        f"  smoother's {b['peak_rss_mb']:.0f} MB, and smoothed accuracy was unchanged.\n"
+        "- **Peer** (the straightforward design: the same graph as plain\n"
+        "  `gtsam.CustomFactor`s in GTSAM's `LevenbergMarquardtOptimizer` and in one\n"
+        f"  ISAM2), on the {pm:g}-minute log, in the same run: our batch is {pl['wall_s'] / ob['wall_s']:.0f}× "
+        "faster than\n"
+        f"  its LM, and our isam2 {pi['wall_s'] / oi['wall_s']:.1f}× faster than its ISAM2, whose update time grew\n"
+        f"  {pi['last_ms'] / pi['first_ms']:.1f}× within those {pm:g} minutes. Before the gyro interval means "
+        "changed, the\n"
+        "  same peers needed more LM iterations and the ratios were larger (git history):\n"
+        "  a better-conditioned problem helps the slow design most. One LM iteration of the peer\n"
+        f"  ({pl['iterations']} in all) still costs {pl['wall_s'] / pl['iterations']:.0f} s on the {pm:g}-minute "
+        f"log; our whole batch run, initial EKF included, takes {ob['wall_s']:.1f} s.\n\n  "
+        + _source("smoother_scaling", d))
+
+
+def _librsf_cell(v) -> str:
+    if isinstance(v, str):
+        head = v.split(":")[0]
+        why = v.split(": ")[1].split(";")[0] if ": " in v else ""
+        return f"diverged: {head}" + (f" ({why})" if why else "")
+    return f"{v:.3f}"
+
+
+def real_data_tables(results: Path) -> str:
+    d = _load("real_data", results)
+    md = ["### OptiOdom square run, motion capture as 1 Hz position fixes", "",
+          "| estimator | RMS position m | scale L / R / track |", "|---|---|---|"]
+    for key, label in (("square_ekf", "ekf (slip only, scales held at 1)"),
+                       ("square_batch", "batch (schedule none, default process noise)")):
+        r = d[key]
+        md.append(f"| {label} | {r['rms_position_m']:.4f} | " + " / ".join(f"{v:.4f}" for v in r["scales"]) + " |")
+    md += ["", "Dead reckoning, encoders only, final-position error [m] (share of the oracle's improvement):", "",
+           "| run | nominal | calibrated on square (tuned process noise) | calibrated, default process noise | "
+           "best fit to these runs (oracle) |", "|---|---|---|---|---|"]
+    runs = [k.removeprefix("dr_") for k in d if k.startswith("dr_")]
+    for name in runs:
+        r = d[f"dr_{name}"]
+        dflt = (r["nominal"] - r["calibrated_default_noise"]) / (r["nominal"] - r["oracle"])
+        md.append(f"| {name} | {r['nominal']:.3f} | {r['calibrated']:.3f} ({r['share_of_oracle_improvement']:.0%}) | "
+                  f"{r['calibrated_default_noise']:.3f} ({dflt:.0%}) | {r['oracle']:.3f} |")
+    for name in runs:
+        r = d[f"dr_{name}"]
+        md.append(f"| {name}, calibrated with 2 Hz fixes | {r['nominal']:.3f} | {r['calibrated_2hz_fixes']:.3f} "
+                  f"({r['share_2hz_fixes']:.0%}) | | {r['oracle']:.3f} |")
+    why, cal = d["square_why"], d["square_calibration"]
+    rnd = lambda v: [round(x, 4) for x in v]   # noqa: E731
+    md += ["", f"Why: dead reckoning alone fits the square run's whole mocap path to {1e3 * why['whole_path_rms_m']:.1f} "
+           f"mm RMS with scales {rnd(why['whole_path_fit'])}; the batch smoother with slip forced to zero everywhere "
+           f"(default process noise) gives {rnd(why['zero_slip_batch'])}.", "",
+           "| calibration on square (tune off) | track scale | " + " | ".join(f"{n} share" for n in runs) + " |",
+           "|---|---|" + "---|" * len(runs)]
+    for label, v in why["variants"].items():
+        md.append(f"| {label} | {v['scales'][2]:.4f} | " + " | ".join(f"{s:.0%}" for s in v["shares"]) + " |")
+    pn = cal["process_noise"]
+    cv = ", ".join(f"×{r['factor']:g} {1e3 * r['rms_m']:.2f} mm" for r in pn["held_out_rms_m"])
+    md += ["", f"Scales calibrated on square: tuned {rnd(cal['tuned'])}, default process noise "
+           f"{rnd(cal['default_noise'])}; oracle {rnd(cal['oracle'])}. Held-out fix error by multiple of the "
+           f"default velocity process noise: {cv} (chosen: accel {pn['accel']:g}, yaw {pn['yaw_accel']:g}).", "",
+           "### libRSF Labyrinth UWB cut (ranges to 4 anchors, wheel speeds)", "",
+           "| estimator | RMS position m |", "|---|---|"]
+    for k, v in d.items():
+        if k.startswith("librsf_") and k not in ("librsf_range_bias", "librsf_dead_reckoning"):
+            md.append(f"| {k.removeprefix('librsf_')} | {_librsf_cell(v)} |")
+    md += [f"| dead reckoning (from the smoother's first pose) | {d['librsf_dead_reckoning']:.3f} |", "",
+           "Estimated range bias per anchor against the mean of (measured − true range):", "",
+           "| anchor | estimated [m] | from ground truth [m] |", "|---|---|---|"]
+    for anchor, b in d["librsf_range_bias"].items():
+        md.append(f"| {anchor} | {b['value']:+.3f} ± {b['sigma']:.3f} | {b['truth_mean_residual']:+.3f} |")
+    return "\n".join(md + ["", _source("real_data", d)])
+
+
+def real_data_findings(results: Path) -> str:
+    d = _load("real_data", results)
+    why, cal = d["square_why"], d["square_calibration"]
+    curve = cal["process_noise"]["held_out_rms_m"]
+    chosen = min(curve, key=lambda c: c["rms_m"])["factor"]
+    share = [d["dr_circular"]["share_of_oracle_improvement"], d["dr_free"]["share_of_oracle_improvement"]]
+    two = [d["dr_circular"]["share_2hz_fixes"], d["dr_free"]["share_2hz_fixes"]]
+    var = why["variants"]
+    passing = [k.removeprefix("velocity process noise ") for k, v in var.items()
+               if k.startswith("velocity process noise") and min(v["shares"]) >= 0.8]
+    robust = [s for k, v in var.items() if "velocity steps" in k for s in v["shares"]]
+    path_shares = var["(no smoother) square's whole-path dead-reckoning fit"]["shares"]
+    rb = d["librsf_range_bias"].values()
+    est = [v["value"] for v in rb]
+    ref = [v["truth_mean_residual"] for v in rb]
+    a, b = d["librsf_batch"], d["librsf_batch, range bias per beacon"]
+    move = "lowers" if b < a else ("raises" if b > a else "leaves")
+    robust_rsf = {k.removeprefix("librsf_batch, "): v for k, v in d.items()
+                  if k in ("librsf_batch, Huber", "librsf_batch, Cauchy")}
+    inc = []
+    for m in ("isam2", "fixed-lag"):
+        v = d[f"librsf_{m}"]
+        inc.append(f"{m} diverges ({v.split(':')[0]})" if isinstance(v, str) else f"{m} finishes at {v:.3f} m")
+    only = ("only " + ", ".join(passing) + (" passes" if len(passing) == 1 else " pass")) if passing else "none passes"
+    return (
+        "- **OptiOdom: the root cause of the bad calibration was the velocity prior,\n"
+        "  not the robot** (the \"Why\" table above). Pure dead reckoning fits the\n"
+        f"  square run's whole mocap path to {1e3 * why['whole_path_rms_m']:.1f} mm RMS with near-nominal scales. The\n"
+        f"  smoother said track {d['square_batch']['scales'][2]:.3f}, and still {why['zero_slip_batch'][2]:.3f} "
+        "with slip forced to zero\n"
+        "  everywhere, so slip was not the cause. This robot starts and stops its\n"
+        "  pivots within one 50 ms encoder cycle. The default random walk on ω\n"
+        "  (0.3 rad/s²/√Hz) resists each jump, and the cheapest way to resist is to\n"
+        "  shrink every ω through the track scale. Raising the velocity process noise\n"
+        "  removes the pull; too much of it lets the square's pivots alone set the\n"
+        "  track.\n"
+        "  - `calibrate` now chooses the multiple by predicting held-out fixes. With\n"
+        f"    1 Hz fixes it picks ×{chosen:g} and {'passes' if min(share) >= 0.8 else 'fails'} the 80 % acceptance "
+        f"test ({_pct(share[0])} and {_pct(share[1])}).\n"
+        f"  - Robust (Huber/Cauchy) velocity steps alone were {'not ' if max(robust) < 0.8 else ''}enough "
+        f"({_minus(_rng([100 * s for s in robust], '{:.0f}'))} % of the oracle's improvement).\n"
+        f"  - The margin is thin: of the multiples tried, {only}, and with 2 Hz fixes the\n"
+        f"    same procedure reaches only {_pct(two[0])} and {_pct(two[1])}. The runs also disagree on effective "
+        "track. The square's own\n"
+        f"    whole-path fit ({why['whole_path_fit'][2]:.3f}) makes the other runs "
+        f"{'worse' if all(s < 0 for s in path_shares) else 'little better'} "
+        f"({_minus(f'{100 * path_shares[0]:.0f} % and {100 * path_shares[1]:.0f} %')}), while their oracle\n"
+        f"    wants {cal['oracle'][2]:.3f}.\n"
+        f"- **libRSF:** the ranges read {'long' if min(ref) > 0 else 'long at some anchors'}. Against ground truth, "
+        "the mean of\n"
+        f"  measured minus true range is {_minus(_rng(ref, '{:+.2f}'))} m per anchor. The per-beacon\n"
+        f"  bias state (`--range-bias`) {move} the smoother's error ({a:.3f} → {b:.3f} m), with\n"
+        f"  estimated biases of {_minus(_rng(est, '{:+.2f}'))} m. The robust losses alone give "
+        + " and ".join(f"{v:.3f} m ({k})" for k, v in robust_rsf.items()) + ".\n"
+        f"- **libRSF, incremental smoothers:** on this cut {' and '.join(inc)}.\n"
+        "  Its wheel speeds read far above the true speeds, and factors linearised\n"
+        "  at predictions made with them are hard to follow. Before session 2\n"
+        "  isam2 and fixed-lag returned paths far off without a word. A watch on\n"
+        "  post-fit residuals now recovers them or stops them with the reason, as\n"
+        "  the EKF's NIS watch does.\n\n  " + _source("real_data", d))
+
+
+def montecarlo_table(results: Path) -> str:
+    d = _load("montecarlo_study", results)
+    cfg = d["configs"]
+    qs = list(next(iter(cfg.values()))["median_ratio_smoother_over_ekf"])
+    rows, frows = [], []
+    for name, c in cfg.items():
+        n = name.removeprefix("config")
+        rows.append(f"| {n} | {c['wall_s'] / 60:.1f} | {c['cpu_s']['ekf']:.0f} | {c['cpu_s']['batch']:.0f} | "
+                    + " | ".join(f"{c['median_ratio_smoother_over_ekf'][q]:.2f}" for q in qs)
+                    + f" | {100 * c['failure_rate']['ekf']:.1f} % / {100 * c['failure_rate']['batch']:.1f} % |")
+        for f in c["findings"]:
+            frows.append(f"| {n} | {f['claim']} | {f['measured']} | "
+                         f"{ {True: 'yes', False: 'no', None: 'n/a'}[f['holds']]} |")
+    t1, t2 = cfg["config1"]["grid_median_track_error"]["ekf"], cfg["config2"]["grid_median_track_error"]["ekf"]
+    frows.append(f"| 1 vs 2 | configuration 2 beats configuration 1 on track width | grid-median track error (EKF) "
+                 f"{100 * t1:.2f} % (config 1) vs {100 * t2:.2f} % (config 2) | {'yes' if t2 < t1 else 'no'} |")
+    return "\n".join([
+        f"{len(cfg)} configurations × {d['grid']}×{d['grid']} noise grid × {d['runs']} runs × 60 s, EKF and batch "
+        f"smoother, local process pool. **Total wall time {d['total_wall_s'] / 60:.1f} min** (target ≤ 30 min on "
+        "2 cores).", "",
+        "| config | wall [min] | EKF CPU [s] | smoother CPU [s] | " + " | ".join(f"smoother/EKF {q}" for q in qs)
+        + " | failures EKF / smoother |",
+        "|---|---|---|---|" + "---|" * len(qs) + "---|", *rows, "",
+        "Ratios are the median over grid points of (smoother median RMS) / (EKF median RMS); below 1 the "
+        "smoother is better.", "",
+        "## The paper's findings on our numbers (EKF)", "",
+        "| config | paper | ours | reproduces |", "|---|---|---|---|", *frows, "", _source("montecarlo_study", d)])
+
+
+def montecarlo_discussion(results: Path) -> str:
+    d = _load("montecarlo_study", results)
+    vec = _load("ekf_vectorised", results)
+    vm = _load("velocity_means", results)
+    cfg = d["configs"]
+    nmax = max(r["runs"] for r in vec["results"].values())
+    speed = [r["speedup"] for r in vec["results"].values() if r["runs"] == nmax]
+    cpu = {k: sum(c["cpu_s"].get(k, 0.0) for c in cfg.values()) for k in ("simulate", "ekf", "batch")}
+    share = cpu["batch"] / sum(cpu.values())
+    made = d["total_wall_s"] <= 30 * 60
+    ratio = {q: [c["median_ratio_smoother_over_ekf"][q] for c in cfg.values()] for q in MC_QUANTITIES}
+    ex = _mc_exceptions(results)
+    g2, g3 = ex["grids"][2], ex["grids"][3]
+    r1, r2, r3 = (ex["ratios"](ex[k]) for k in ("r1", "r2", "r3"))
+    weight = (vm["sensor_sigma"] / vm["interpolated_sigma_median"]) ** 2
+    fail = {e: max(c["failure_rate"][e] for c in cfg.values()) for e in ("ekf", "batch")}
+    failures = sum(g.failures() for g in ex["grids"].values())
+    g1 = ex["grids"][1]
+    if failures == 0 and not any(fail.values()):
+        failed = (f"- **No run failed,** not even at {g1.xs[-1]:g} m GPS with a {g1.ys[-1]:g} rad/s gyro, or at "
+                  f"{g3.xs[-1]:g} m\n  ranges. The paper saw the EKF diverge at its extremes; our consider-update\n"
+                  "  EKF, with a data-driven start, does not.")
+    else:
+        failed = (f"- **Runs failed:** {failures} in all; the worst configuration's failure rate is "
+                  f"{100 * fail['ekf']:.1f} % for the EKF and {100 * fail['batch']:.1f} % for the smoother.")
+    return (
+        f"- **Speed.** The target was ≤ 30 min on 2 cores. Two choices {'made it' if made else 'were not enough'}\n"
+        f"  (measured): the EKF runs all {nmax} runs of a grid point at once (next\n"
+        f"  section, {_rng(speed, '{:.1f}')}× faster than one at a time), and the batch smoother starts\n"
+        f"  from that EKF estimate instead of running its own EKF. The smoother is {_pct(share)}\n"
+        "  of the CPU time.\n"
+        f"- **The smoother beats the EKF in {ex['total'] - ex['worse']} of {ex['total']} cells** (configuration, "
+        "grid point, quantity).\n"
+        f"  Slip is {_rng(ratio['slip_left'] + ratio['slip_right'])}×, ticks per metre "
+        f"{_rng(ratio['scale_left'] + ratio['scale_right'])}× and track width {_rng(ratio['scale_track'])}× "
+        "(medians over grid\n"
+        "  points). At poor GPS much of that margin is the EKF's speed-shrinkage\n"
+        "  bias (section \"Speed shrinkage\"), which the smoother's wheel-speed units\n"
+        "  reduce. Where the smoother is not better everywhere (every grid point of each region):\n"
+        f"  - Track width with very precise ranges (config 3, range σ {g3.xs[0]:g} m):\n"
+        f"    {_rng(r1)}× the EKF's ({_above(r1)} gyro σ), at the "
+        f"{_rng(ex['level'](ex['r1'], 'batch'))} % level. That is where the\n"
+        "    keyframe motion model's floor (1 mm, 0.1 mrad per 0.2 s interval)\n"
+        "    starts to matter.\n"
+        f"  - Track width with {g2.xs[0]:g} m GPS and a velocity sensor (config 2): {_rng(r2)}× "
+        f"({_above(r2)} velocity σ).\n"
+        f"  - Ticks per metre with a {100 * g2.ys[0]:g} cm/s velocity sensor and GPS of {g2.xs[1]:g} m or worse\n"
+        f"    (config 2): {_rng(r3)}× the EKF's ({_rng(ex['level'](ex['r3'], 'batch'))} % against "
+        f"{_rng(ex['level'](ex['r3'], 'ekf'))} %, {_above(r3)} cells). This\n"
+        "    column got worse when velocity readings moved to the interpolated\n"
+        "    interval means of `keyframes.interval_means` (every other velocity-σ\n"
+        "    column improved; the old results are in git history at `eeba92d`).\n"
+        "    `python -m benchmarks.velocity_means` (`results/velocity_means.md`)\n"
+        "    shows both sides:\n"
+        f"    - the interpolated means are {vm['plain_mean_rms'] / vm['interpolated_rms']:.1f}× closer to the true "
+        "interval average\n"
+        f"      than the old mean of the samples inside ({vm['interpolated_rms']:.3f} against "
+        f"{vm['plain_mean_rms']:.3f} m/s RMS),\n"
+        "      because a 5 Hz point sample is not a 0.2 s average while the speed\n"
+        "      ramps;\n"
+        "    - their σ, though, includes the interpolation error of the default\n"
+        f"      velocity random walk (0.2 m/s/√s), {vm['interpolated_sigma_median']:.3f} m/s (median), so on this "
+        "smooth\n"
+        f"      simulated motion the {vm['sensor_sigma']:g} m/s sensor counts for {_pct(weight)} of its worth.\n"
+        "    - The bias is not in the velocity data. Prototypes (code not kept)\n"
+        "      found that true interval averages in place of the readings, at the\n"
+        "      same σ, leave most of it, and that it grows as the\n"
+        "      velocity sensor's weight goes to zero. It is already there in the\n"
+        "      20 s calibration window: a prototype that kept the encoders after\n"
+        "      the window from informing the scale factors left it unchanged. After\n"
+        "      the window, a common-mode slip offset carries the excess, and the\n"
+        "      estimated path keeps the right size and speed. The EKF shows a smaller\n"
+        "      bias of the same sign at the same grid point.\n"
+        "    - Most of it is the speed shrinkage of the random walks (section\n"
+        "      \"Speed shrinkage\"): with a weak speed reference the walks pull the\n"
+        "      speeds down and ticks/m up. The wheel-speed units shipped since then\n"
+        "      lowered this column's ratio (before: git history); the rest is left\n"
+        "      open with that section's.\n"
+        f"  - Elsewhere: {_others_text(ex)}.\n"
+        + failed + "\n\n  "
+        + _sources(("montecarlo_study.json` and `montecarlo/config{1,2,3}_results.csv", d),
+                   ("ekf_vectorised.json", vec), ("velocity_means.json", vm)))
+
+
+def ekf_vectorised(results: Path) -> str:
+    d = _load("ekf_vectorised", results)
+    res = d["results"]
+    rows = [f"| {k.split('_')[0].removeprefix('config')} | {r['runs']} | {r['per_run_ms_one_by_one']:.0f} | "
+            f"{r['per_run_ms_vectorised']:.0f} | {r['speedup']:.1f}× | {r['max_abs_difference']:.1e} |"
+            for k, r in res.items()]
+    diff = max(r["max_abs_difference"] for r in res.values())
+    single = [1 / r["speedup"] for r in res.values() if r["runs"] == 1]
+    slower = all(s > 1 for s in single)
+    return "\n".join([
+        "60 s runs of the study's configuration 1 (GPS 10 Hz + gyro 25 Hz) and 3 (three beacons at 20 Hz + gyro); "
+        "best of the interleaved repeats (`--repeats`).", "",
+        "| config | runs | ms per run, one by one | ms per run, vectorised | speed-up | max state difference |",
+        "|---|---|---|---|---|---|", *rows, "",
+        "One event loop serves all runs of a grid point: state (N, 11), covariance\n"
+        "(N, 11, 11), the same `factors` models (they broadcast). The outputs equal\n"
+        f"the one-run EKF to {diff:.1e} (also a test). For a single run the batched code is\n"
+        f"{_rng(single, '{:.1f}')}× {'slower than' if slower else 'the speed of'} the scalar EKF, which is tuned for "
+        "one state. That is why\n"
+        "both exist and the study uses the batched one only for N > 1.", "", _source("ekf_vectorised", d)])
+
+
+BLOCKS = {f.__name__: f for f in (
+    ekf_accuracy, ekf_throughput, smoother_accuracy, faults, real_data_honesty,
+    # README.md
+    smoother_scale, wheel_speed_units, montecarlo_wall, montecarlo_findings, optiodom_transfer, librsf_limits,
+    faults_still, range_bias,
+    # benchmarks/README.md
+    ekf_accuracy_table, ekf_throughput_table, smoother_accuracy_table, smoother_accuracy_findings, track_bias,
+    smoother_consistency, speed_shrinkage, smoother_scaling_table, smoother_scaling_memory_peer, real_data_tables,
+    real_data_findings, montecarlo_table, montecarlo_discussion, ekf_vectorised)}
 
 
 def render(text: str, results: Path = RESULTS) -> str:

@@ -205,13 +205,17 @@ class _MultiProgress(_Progress):
         return update
 
 
-def _print_comparison(m: dict) -> None:
-    from odomgraph.analysis.report import metrics_table_rows
-    rows = metrics_table_rows(m)
-    keep = [0, 1, 2, 3, 7, 9]  # the columns that fit a terminal
+def _columns(rows: list[list[str]], keep: list[int]) -> None:
     widths = [max(len(r[i]) for r in rows) for i in keep]
     for r in rows:
         _out("  ".join(r[i].ljust(w) for i, w in zip(keep, widths)))
+
+
+def _print_comparison(m: dict, determined: dict | None = None) -> None:
+    from odomgraph.analysis.report import metrics_table_rows, scale_table_rows
+    _columns(metrics_table_rows(m), [0, 1, 2, 3, 4, 6])  # the columns that fit a terminal
+    _out("")
+    _columns(scale_table_rows(m, determined or {}), list(range(7)))
     _out(f"reference: {m['reference_note']}")
     for label, e in m["estimators"].items():
         if "failed" in e and label != "isam2-online":
@@ -473,7 +477,8 @@ def demo(
     with _MultiProgress() as bars:
         cmp = compare_to_dir(log, output, Schedule(calibrate_until=sc.calibrate_until), bars,
                              title=f"odomgraph demo: paper scenario (sec. IV), seed {seed}", include_log=True)
-    _print_comparison(cmp.metrics)
+    _print_comparison(cmp.metrics, {k: {n: c["observable"] for n, c in e.calibration.items()}
+                                    for k, e in cmp.estimates.items()})
     _out(f"wrote {output}/report.html (open it in a browser), the figures, metrics.json, "
                f"{output}/log and one estimate directory per estimator")
 
@@ -508,7 +513,8 @@ def compare(
     with _MultiProgress() as bars:
         cmp = compare_to_dir(log, output, schedule, bars, gate=gate, keyframe_hz=keyframe_hz,
                              robust=robust.value if robust else None, range_bias=range_bias or None)
-    _print_comparison(cmp.metrics)
+    _print_comparison(cmp.metrics, {k: {n: c["observable"] for n, c in e.calibration.items()}
+                                    for k, e in cmp.estimates.items()})
     _out(f"wrote {output}/report.html")
 
 

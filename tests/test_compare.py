@@ -38,19 +38,27 @@ def compared(tmp_path_factory, short_log_dir):
     return out, res.output
 
 
-def test_compare_writes_a_self_contained_report(compared):
+def test_compare_writes_a_self_contained_report(compared, short_log_dir):
     out, output = compared
     names = sorted(p.name for p in out.iterdir() if p.name != ".odomgraph")
     assert names == sorted(["batch", "ekf", "isam2", "figure.png", "metrics.json", "report.html", *FIGS])
     assert (out / "isam2" / "online.csv").exists()
     page = (out / "report.html").read_text()
-    # every figure embedded as a data URI, nothing fetched from elsewhere
-    imgs = re.findall(r"<img alt='([^']+)' src='data:image/png;base64,([A-Za-z0-9+/=]+)'", page)
-    assert sorted(n for n, _ in imgs) == FIGS
-    for name, data in imgs:
-        import base64
-        assert base64.b64decode(data) == (out / name).read_bytes()
-    assert not re.search(r"(src|href)=['\"](https?:|//)", page)
+    # every figure drawn by the inlined plotly.js from data in the page, the PNGs linked beside it
+    from odomgraph.analysis.interactive import FIGURES as LIVE
+    for fid, _, _ in LIVE:
+        assert f"<div id='{fid}' class='plot'></div><script>(function(){{var f={{\"data\":" in page, fid
+    assert sorted(re.findall(r"<a href='([^']+\.png)'>", page)) == FIGS
+    assert page.count("<script>") == 2 + len(LIVE) and "<script src" not in page
+    m = json.loads((out / "metrics.json").read_text())
+    from odomgraph import __version__
+    from odomgraph.analysis.card import fingerprint
+    prov = m["provenance"]
+    assert prov["odomgraph"] == __version__ and prov["log_sha256"] == fingerprint(short_log_dir)
+    assert len(prov["log_sha256"]) == 16 and f"sha256 {prov['log_sha256']}" in page
+    # no markup that fetches (plotly.js's own source mentions URLs; the browser test counts requests)
+    markup = re.sub(r"<script>.*?</script>", "", page, flags=re.S)
+    assert not re.search(r"(src|href)=['\"](https?:|//)", markup)
     assert "isam2-online" in page and "RMS position error" in page
     assert "isam2-online" in output and "reference: errors against the log's truth.csv" in output
 

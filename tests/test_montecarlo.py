@@ -170,7 +170,15 @@ def test_outputs_and_cli(small_study, tmp_path):
     j = json.loads((d / "results.json").read_text())
     assert j["study"]["runs"] == 3 and len(j["points"]) == 4
     page = (d / "summary.html").read_text()
-    assert "data:image/png;base64," in page and "from 1.5 m to 0.05 m GPS" in page
+    assert "from 1.5 m to 0.05 m GPS" in page and "href='heatmap_config1.png'" in page
+    assert all(f"<div id='heat-{k}' class='plot'>" in page for k in range(4))
+    # the interactive heatmaps carry the medians (in %) the results table has, and hover says the failures
+    from odomgraph.analysis.montecarlo_report import heatmap_specs
+    fid, _, fig = heatmap_specs(SMALL, res)[0]
+    ekf = fig["data"][0]
+    assert ekf["name"] == "ekf" and fid == "heat-0"
+    assert ekf["z"][0][0] == pytest.approx(100 * res[0].medians("ekf")["scale_left"], rel=1e-3)
+    assert "failed 0% of 3 runs" in ekf["text"][0][0]
     r = CliRunner().invoke(app, ["montecarlo", "--config", "4", "-o", str(tmp_path / "x")])
     assert r.exit_code == 1 and r.output.strip() == "odomgraph: error: --config must be 1, 2 or 3, got 4"
 

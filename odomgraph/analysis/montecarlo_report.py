@@ -130,8 +130,42 @@ def findings(spec: StudySpec, results: list[PointResult], estimator: str = "ekf"
     return out
 
 
+def heatmap_specs(spec: StudySpec, results: list[PointResult]) -> list[tuple[str, str, dict]]:
+    """(id, caption, plotly figure) per heatmap row of _ROWS: the EKF's and
+    the smoother's medians side by side over the noise grid; hovering a cell
+    shows both noise values, the median, the share of failed runs and the
+    runs it rests on."""
+    from odomgraph.sim.sensor_configs import CONFIGS
+    cfg = CONFIGS[spec.config]
+    ests = [e for e in ("ekf", "batch") if any(e in r.scores for r in results)]
+    xs = [f"{v:.3g}" for v in spec.y_values]
+    ys = [f"{v:.3g}" for v in spec.x_values]
+    out = []
+    for row, (label, qs, k, unit) in enumerate(_ROWS):
+        data, layout = [], {"title": {"text": f"{label}: median RMS error [{unit}]", "font": {"size": 15}},
+                            "height": 420, "grid": {"rows": 1, "columns": len(ests), "pattern": "independent"},
+                            "margin": {"l": 70, "r": 20, "t": 60, "b": 60}, "template": None}
+        for c, e in enumerate(ests):
+            g = k * quantity_grid(spec, results, e, qs)
+            fail = failure_grid(spec, results, e)
+            text = [[f"{e}<br>{cfg.x.label} {ys[i]}, {cfg.y.label} {xs[j]}<br>median "
+                     f"{'–' if not np.isfinite(g[i, j]) else format(g[i, j], '.3g')} {unit}<br>failed "
+                     f"{fail[i, j]:.0%} of {spec.runs} runs" for j in range(len(xs))] for i in range(len(ys))]
+            ax = "" if c == 0 else str(c + 1)
+            data.append({"type": "heatmap", "z": [[None if not np.isfinite(v) else float(f"{v:.4g}") for v in r]
+                                                  for r in g], "x": xs, "y": ys, "text": text,
+                         "hovertemplate": "%{text}<extra></extra>", "colorscale": "Viridis",
+                         "zmin": 0, "showscale": c == len(ests) - 1, "xaxis": f"x{ax}", "yaxis": f"y{ax}",
+                         "texttemplate": "%{z:.3g}", "name": e})
+            layout[f"xaxis{ax}"] = {"title": {"text": f"{e}: {cfg.y.label}"}, "type": "category"}
+            layout[f"yaxis{ax}"] = {"title": {"text": cfg.x.label}, "type": "category"}
+        out.append((f"heat-{row}", f"{label}, EKF and smoother side by side (paper figs. 8-10).",
+                    {"data": data, "layout": layout}))
+    return out
+
+
 def summary_html(spec: StudySpec, results: list[PointResult], directory, figures: list[Path]) -> str:
-    from odomgraph.analysis.report import embed_png
+    from odomgraph.analysis.interactive import figure_script, plotly_js
     from odomgraph.sim.sensor_configs import CONFIGS
     cfg = CONFIGS[spec.config]
     esc = html.escape
@@ -140,7 +174,8 @@ def summary_html(spec: StudySpec, results: list[PointResult], directory, figures
              f"<title>Monte-Carlo configuration {cfg.number}</title><style>"
              "body{font-family:system-ui,sans-serif;max-width:1300px;margin:2em auto;color:#222}"
              "table{border-collapse:collapse;font-size:.82em}td,th{border:1px solid #ccc;padding:.2em .5em;"
-             "text-align:right}th{background:#f2f2f2}img{max-width:100%}</style></head><body>",
+             "text-align:right}th{background:#f2f2f2}img{max-width:100%}</style>"
+             f"<script>{plotly_js()}</script></head><body>",
              f"<h1>Monte-Carlo study, configuration {cfg.number}: {esc(cfg.title)}</h1>",
              f"<p>{len(spec.x_values)}×{len(spec.y_values)} grid, {spec.runs} runs of {spec.duration:g} s per point "
              f"(seed {spec.seed}), schedule: scale factors for the first {spec.calibrate_until:g} s, then slip. "
@@ -152,8 +187,12 @@ def summary_html(spec: StudySpec, results: list[PointResult], directory, figures
             verdict = {True: "reproduces", False: "does not reproduce", None: "grid cannot tell"}[f["holds"]]
             parts.append(f"<li><b>{esc(f['claim'])}</b>: {esc(f['measured'])}. <i>{verdict}</i></li>")
         parts.append("</ul>")
-    for p in figures:
-        parts.append(embed_png(p, Path(p).name))
+    parts.append("<h2>Heatmaps</h2><p>Hover a cell for its grid point's numbers; drag to zoom.</p>")
+    for fid, caption, fig in heatmap_specs(spec, results):
+        parts.append(f"<figure>{figure_script(fid, fig)}<figcaption>{esc(caption)}</figcaption></figure>")
+    if figures:
+        parts.append("<p>As PNG, for papers: " + ", ".join(f"<a href='{esc(Path(p).name)}'>{esc(Path(p).name)}</a>"
+                                                           for p in figures) + ".</p>")
     cols = list(rows[0])
     parts.append("<h2>Results</h2><table><tr>" + "".join(f"<th>{esc(c)}</th>" for c in cols) + "</tr>")
     for r in rows:

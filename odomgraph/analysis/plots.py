@@ -140,7 +140,7 @@ def gps_deviation_figure(estimates, log, path, title: str = "") -> Path | None:
             # RMS over about one second: single fixes scatter by the GPS noise
             # and would hide the slow drift that fig. 7 is about.
             n = max(1, int(round(s[1].size / max(s[0][-1] - s[0][0], 1e-9))))
-            ax.plot(s[0] - log.t_start, np.sqrt(_running_mean(s[1] ** 2, n)), color=_color(est, k), lw=1.1,
+            ax.plot(s[0] - log.t_start, np.sqrt(running_mean(s[1] ** 2, n)), color=_color(est, k), lw=1.1,
                     ls="--" if est.method == "ekf-no-slip" else "-", label=est.method)
     _switch_lines(ax, estimates, log.t_start)
     sig = log.gps.sigma if log.gps.sigma is not None else np.full(1, log.robot.gps_sigma)
@@ -152,7 +152,7 @@ def gps_deviation_figure(estimates, log, path, title: str = "") -> Path | None:
     return _save(fig, path, title)
 
 
-def _running_mean(x: np.ndarray, n: int) -> np.ndarray:
+def running_mean(x: np.ndarray, n: int) -> np.ndarray:
     n = max(1, min(n, x.size))
     c = np.cumsum(np.concatenate([[0.0], x]))
     out = np.empty_like(x, dtype=float)
@@ -173,7 +173,7 @@ def consistency_figure(estimates, log, path, title: str = "", window: int = 50) 
     for k, est in enumerate(estimates):
         s = nees_series(est, log)
         if s is not None and s[1].size:
-            ax.plot(s[0] - t0, _running_mean(s[1], window), color=_color(est, k), lw=1, label=est.method)
+            ax.plot(s[0] - t0, running_mean(s[1], window), color=_color(est, k), lw=1, label=est.method)
             drawn = True
     if drawn:
         ax.axhline(3.0, color="k", lw=0.8, ls="--", label="expected (3)")
@@ -190,7 +190,7 @@ def consistency_figure(estimates, log, path, title: str = "", window: int = 50) 
         for k, (name, inn) in enumerate(ekf.innovations.items()):
             if inn.nis.size:
                 c = _SPARE[k % len(_SPARE)]
-                ax.plot(inn.t - t0, _running_mean(inn.nis, window) / inn.dof, color=c, lw=1,
+                ax.plot(inn.t - t0, running_mean(inn.nis, window) / inn.dof, color=c, lw=1,
                         label=f"{name} (dof {inn.dof})")
         ax.axhline(1.0, color="k", lw=0.8, ls="--", label="expected")
         ax.set_yscale("log")
