@@ -117,6 +117,46 @@ class ImportKind(str, Enum):
     rosbag = "rosbag"
 
 
+class Numbers:
+    """Parser of ``n`` comma-separated finite numbers ("0.005,0.01"), run as
+    the option is read: a bad value is a usage error naming the option,
+    before any work starts."""
+
+    def __init__(self, n: int, what: str):
+        self.n, self.what = n, what
+        self.__name__ = what
+
+    def __call__(self, value):
+        import math
+        if isinstance(value, tuple):
+            return value
+        try:
+            vals = tuple(float(v) for v in str(value).split(","))
+        except ValueError:
+            vals = ()
+        if len(vals) != self.n or not all(math.isfinite(v) for v in vals):
+            raise typer.BadParameter(f"expected {self.n} comma-separated finite numbers ({self.what}), "
+                                     f"got {value!r}")
+        return vals
+
+
+def slip_spec(value):
+    """Parser of a slip event "left|right:start:end:speed" [s, s, m/s]."""
+    from odomgraph.sim.scenarios import SlipEvent
+    if not isinstance(value, str):
+        return value
+    parts = value.split(":")
+    if len(parts) != 4 or parts[0] not in ("left", "right"):
+        raise typer.BadParameter(f"expected 'left|right:start:end:speed', got {value!r}")
+    from odomgraph.errors import OdomgraphError
+    try:
+        return SlipEvent(parts[0], float(parts[1]), float(parts[2]), float(parts[3]))
+    except ValueError:
+        raise typer.BadParameter(f"expected numbers in {value!r}") from None
+    except OdomgraphError as exc:  # the event's own checks (start <= end, ...)
+        raise typer.BadParameter(str(exc)) from None
+
+
 class AtName(str, Enum):
     truth = "truth"
     gps = "gps"
@@ -290,10 +330,11 @@ def simulate(
     gps_sigma: Annotated[Optional[float], typer.Option(help="GPS noise 1-sigma [m] (eq. 39).")] = None,
     gyro_sigma: Annotated[Optional[float], typer.Option(help="Gyro noise 1-sigma [rad/s] (eq. 40).")] = None,
     range_sigma: Annotated[Optional[float], typer.Option(help="Range noise 1-sigma [m].")] = None,
-    encoder_sigma: Annotated[Optional[str], typer.Option(help="Wheel-speed noise 'a,b': a + b|v| m/s (eq. 41).")]
-    = None,
-    scales: Annotated[Optional[str], typer.Option(help="True scale factors 'left,right,track'.")] = None,
-    slip: Annotated[Optional[list[str]], typer.Option(
+    encoder_sigma: Annotated[Optional[tuple], typer.Option(
+        parser=Numbers(2, "a,b"), metavar="A,B", help="Wheel-speed noise 'a,b': a + b|v| m/s (eq. 41).")] = None,
+    scales: Annotated[Optional[tuple], typer.Option(
+        parser=Numbers(3, "left,right,track"), metavar="L,R,T", help="True scale factors 'left,right,track'.")] = None,
+    slip: Annotated[Optional[list], typer.Option(parser=slip_spec, metavar="WHEEL:START:END:SPEED",
         help="Slip event 'wheel:start:end:speed' (s, s, m/s); repeat for more. Replaces the scenario's.")] = None,
     no_slip: Annotated[bool, typer.Option("--no-slip", help="No slip events at all.")] = False,
     initial: Annotated[bool, typer.Option(help="Write the true start pose as robot.toml [initial].")] = False,
@@ -330,10 +371,9 @@ def simulate(
 
     The fault options inject what real logs contain (odomgraph.sim.faults);
     truth stays what really happened."""
-    import math
     from odomgraph.errors import OdomgraphError
     from odomgraph.io.log import write_log
-    from odomgraph.sim.scenarios import SCENARIOS, SlipEvent
+    from odomgraph.sim.scenarios import SCENARIOS
     from odomgraph.sim.simulate import beacons_around_path
 
     from odomgraph.io.outdir import check_output
@@ -341,15 +381,6 @@ def simulate(
     if duration is not None and not (0 < duration <= 1e6):
         raise OdomgraphError(f"--duration must be positive (and at most 1e6 s), got {duration:g}")
     sc = SCENARIOS[scenario.value]() if duration is None else SCENARIOS[scenario.value](duration)
-
-    def floats(text, n, opt):
-        try:
-            vals = tuple(float(v) for v in text.split(","))
-        except ValueError:
-            vals = ()
-        if len(vals) != n or not all(math.isfinite(v) for v in vals):
-            raise OdomgraphError(f"{opt}: expected {n} comma-separated finite numbers, got {text!r}")
-        return vals
 
     rates = {k: v for k, v in dict(encoders=encoder_hz, gyro=gyro_hz, gps=gps_hz, ranges=range_hz,
                                      velocity=velocity_hz).items() if v is not None}
@@ -363,27 +394,18 @@ def simulate(
                 raise OdomgraphError(f"--{name.replace('_', '-')} must be positive, got {val:g}")
             robot = robot.with_(**{name: val})
     if encoder_sigma is not None:
-        robot = robot.with_(encoder_sigma=floats(encoder_sigma, 2, "--encoder-sigma"))
+        robot = robot.with_(encoder_sigma=encoder_sigma)
     if sc.rates.ranges > 0 and not robot.beacons:
         robot = robot.with_(beacons=beacons_around_path(sc))
     sc = sc.with_(robot=robot, write_initial=initial)
     if scales is not None:
-        sc = sc.with_(scales=floats(scales, 3, "--scales"))
+        sc = sc.with_(scales=scales)
         if not all(0.2 < v < 5 for v in sc.scales):
-            raise OdomgraphError(f"--scales: each scale factor must be between 0.2 and 5, got {scales!r}")
+            raise OdomgraphError(f"--scales: each scale factor must be between 0.2 and 5, got {list(scales)}")
     if no_slip:
         sc = sc.with_(slips=())
     elif slip:
-        events = []
-        for s in slip:
-            parts = s.split(":")
-            if len(parts) != 4 or parts[0] not in ("left", "right"):
-                raise OdomgraphError(f"--slip: expected 'left|right:start:end:speed', got {s!r}")
-            try:
-                events.append(SlipEvent(parts[0], float(parts[1]), float(parts[2]), float(parts[3])))
-            except ValueError:
-                raise OdomgraphError(f"--slip: expected numbers in {s!r}") from None
-        sc = sc.with_(slips=tuple(events))
+        sc = sc.with_(slips=tuple(slip))
     from odomgraph.sim.faults import Faults, inject, parse
     kw = parse("outliers", outliers) if outliers else {}
     faults = Faults(**kw, outages=tuple(parse("outage", v) for v in outage or ()),
@@ -658,7 +680,8 @@ def import_(
     imu_axis: Annotated[str, typer.Option(
         help="rosbag: the IMU axis that measures yaw: auto (the mounting in /tf_static, else the signed axis "
              "that follows the wheels' turn rate), x, y, z, -x, -y or -z.")] = "auto",
-    gps_lever_arm: Annotated[Optional[str], typer.Option(
+    gps_lever_arm: Annotated[Optional[tuple], typer.Option(
+        parser=Numbers(2, "x,y"), metavar="X,Y",
         help="rosbag: GPS antenna 'x,y' in the robot frame [m] (default: from /tf_static, else 0,0).")] = None,
     stamps: Annotated[str, typer.Option(
         help="rosbag: time stamps from the message headers (the sensors' clock) or the bag's receive time: "
@@ -693,15 +716,8 @@ def import_(
         from odomgraph.io.importers.rosbag import import_rosbag
         if track_width is None:
             raise OdomgraphError("import rosbag needs --track-width (the nominal robot) [m]")
-        lever = None
-        if gps_lever_arm is not None:
-            try:
-                lever = tuple(float(v) for v in gps_lever_arm.split(","))
-                assert len(lever) == 2
-            except (ValueError, AssertionError):
-                raise OdomgraphError(f"--gps-lever-arm: expected 'x,y' in metres, got {gps_lever_arm!r}") from None
         log = import_rosbag(source, wheel_topic, left_joint, right_joint, wheel_radius, track_width,
-                            gps_topic, imu_topic, gps_lever_arm=lever, imu_axis=imu_axis, stamps=stamps)
+                            gps_topic, imu_topic, gps_lever_arm=gps_lever_arm, imu_axis=imu_axis, stamps=stamps)
     else:
         from odomgraph.io.importers.librsf import import_librsf
         log = import_librsf(source, ground_truth)
