@@ -300,15 +300,20 @@ def smoother_scale(results: Path) -> str:
             f"than one ISAM2 over them{unfinished}.\n\n  " + _source("smoother_scaling", d))
 
 
+def _shrinkage(sh: dict) -> dict:
+    """speed_shrinkage.json's rows by (GPS σ, variant)."""
+    return {(r["gps_sigma"], r["variant"]): r for r in sh["results"].values()}
+
+
 def wheel_speed_units(results: Path) -> str:
     sh = _load("speed_shrinkage", results)
-    d = sh["results"]
-    gps = sorted({r["gps_sigma"] for r in d.values()})
+    d = _shrinkage(sh)
+    gps = sorted({s for s, _ in d})
     g = gps[_near(gps, 0.34)]
-    ekf, plain = d[f"{g:g}/ekf"], d[f"{g:g}/batch, plain walks"]
+    ekf, plain = d[(g, "ekf")], d[(g, "batch, plain walks")]
     z = [abs(m) / s for r in (ekf, plain) for m, s in zip(r["mean_pct"], r["spread_pct"])]
     cut = [1 - abs(b) / abs(p) for s in gps
-           for b, p in zip(d[f"{s:g}/batch"]["mean_pct"], d[f"{s:g}/batch, plain walks"]["mean_pct"])]
+           for b, p in zip(d[(s, "batch")]["mean_pct"], d[(s, "batch, plain walks")]["mean_pct"])]
     return ("- **Random walks in wheel-speed units (batch, with a calibration window).**\n"
             "  A Gaussian walk on the speeds is cheapest when the speeds are small, and\n"
             "  the encoder model lets larger scale factors pay for smaller speeds. With\n"
@@ -501,7 +506,8 @@ def ekf_accuracy_table(results: Path) -> str:
                                                   "scale_track")}
         rows.append(
             f"| {name} | {s['seeds']} | {100 * max(s['scale_rel_error_max'][:2]):.2f} | "
-            f"{100 * s['scale_rel_error_max'][2]:.2f} | {s['slip_rms_pooled'][0]:.4f} / {s['slip_rms_pooled'][1]:.4f} | "
+            f"{100 * s['scale_rel_error_max'][2]:.2f} | "
+            f"{s['slip_rms_pooled'][0]:.4f} / {s['slip_rms_pooled'][1]:.4f} | "
             f"{s['slip_rms_worst_seed'][0]:.4f} / {s['slip_rms_worst_seed'][1]:.4f} | {100 * min(cov.values()):.1f} "
             f"({min(cov, key=cov.get)}) |")
     return "\n".join([
@@ -651,20 +657,20 @@ def smoother_consistency(results: Path) -> str:
 
 def speed_shrinkage(results: Path) -> str:
     sh = _load("speed_shrinkage", results)
-    d = sh["results"]
-    gps = sorted({r["gps_sigma"] for r in d.values()})
+    d = _shrinkage(sh)
+    gps = sorted({s for s, _ in d})
     rows = [f"| {r['gps_sigma']:g} | {r['variant']} | "
             + " | ".join(f"{m:+.2f} ± {s:.2f}" for m, s in zip(r["mean_pct"], r["spread_pct"])) + " |"
             for r in d.values()]
     g = gps[_near(gps, 0.34)]
-    ekf = {s: d[f"{s:g}/ekf"]["mean_pct"] for s in gps}
+    ekf = {s: d[(s, "ekf")]["mean_pct"] for s in gps}
     ticks, track = ekf[g][:2], ekf[g][2]
     slope = math.log(abs(ekf[gps[-1]][0]) / abs(ekf[gps[0]][0])) / math.log(gps[-1] / gps[0])
     cut = [1 - abs(b) / abs(p) for s in gps
-           for b, p in zip(d[f"{s:g}/batch"]["mean_pct"], d[f"{s:g}/batch, plain walks"]["mean_pct"])]
+           for b, p in zip(d[(s, "batch")]["mean_pct"], d[(s, "batch, plain walks")]["mean_pct"])]
 
     def before_after(s):
-        p, b = d[f"{s:g}/batch, plain walks"]["mean_pct"], d[f"{s:g}/batch"]["mean_pct"]
+        p, b = d[(s, "batch, plain walks")]["mean_pct"], d[(s, "batch")]["mean_pct"]
         return (f"{s:g} m: {_rng([abs(v) for v in p])} → {_rng([abs(v) for v in b])} %")
     return "\n".join([
         f"Mean ± spread over seeds of the final error, % (Monte-Carlo configuration 1, {sh['seeds']} seeds per "
@@ -800,8 +806,9 @@ def real_data_tables(results: Path) -> str:
                   f"({r['share_2hz_fixes']:.0%}) | | {r['oracle']:.3f} |")
     why, cal = d["square_why"], d["square_calibration"]
     rnd = lambda v: [round(x, 4) for x in v]   # noqa: E731
-    md += ["", f"Why: dead reckoning alone fits the square run's whole mocap path to {1e3 * why['whole_path_rms_m']:.1f} "
-           f"mm RMS with scales {rnd(why['whole_path_fit'])}; the batch smoother with slip forced to zero everywhere "
+    md += ["", "Why: dead reckoning alone fits the square run's whole mocap path to "
+           f"{1e3 * why['whole_path_rms_m']:.1f} mm RMS with scales {rnd(why['whole_path_fit'])}; the batch smoother "
+           "with slip forced to zero everywhere "
            f"(default process noise) gives {rnd(why['zero_slip_batch'])}.", "",
            "| calibration on square (tune off) | track scale | " + " | ".join(f"{n} share" for n in runs) + " |",
            "|---|---|" + "---|" * len(runs)]

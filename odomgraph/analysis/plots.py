@@ -120,7 +120,8 @@ def scale_figure(estimates, log, path, title: str = "") -> Path:
         pad = max(0.01, 0.3 * (hi - lo))
         ax.set_ylim(lo - pad, hi + pad)
         ax.set_ylabel(f"{_SCALE_NAMES[k]} scale [-]")
-        ax.legend(loc="upper right", fontsize=8)
+        # outside the axes: inside, the legend covers the bands it explains
+        ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8, borderaxespad=0)
     axes[0].set_title("Scale factors with ±3σ (paper figs. 3, 4)")
     axes[-1].set_xlabel("time since log start [s]")
     return _save(fig, path, title)
@@ -145,11 +146,21 @@ def gps_deviation_figure(estimates, log, path, title: str = "") -> Path | None:
     _switch_lines(ax, estimates, log.t_start)
     sig = log.gps.sigma if log.gps.sigma is not None else np.full(1, log.robot.gps_sigma)
     ax.axhline(float(np.median(sig)) * np.sqrt(2), color="k", lw=0.7, ls=":", label="GPS 1σ (2-D RMS)")
-    ax.set_yscale("log")
+    _plain_log_axis(ax)
     ax.set_xlabel("time since log start [s]"); ax.set_ylabel("|predicted antenna − GPS|, 1 s RMS [m]")
     ax.set_title("Position deviation from GPS, with and without slip states (paper fig. 7)")
     ax.legend(loc="upper right", fontsize=8)
     return _save(fig, path, title)
+
+
+def _plain_log_axis(ax) -> None:
+    """A log y axis labelled 0.05, 0.1, 0.5, 1 rather than 6×10⁻¹ (matplotlib
+    labels minor ticks in powers of ten when a decade is short)."""
+    from matplotlib.ticker import FuncFormatter, LogLocator, NullFormatter
+    ax.set_yscale("log")
+    ax.yaxis.set_major_locator(LogLocator(base=10, subs=(1.0, 2.0, 5.0)))
+    ax.yaxis.set_major_formatter(FuncFormatter(lambda v, _: f"{v:g}"))
+    ax.yaxis.set_minor_formatter(NullFormatter())
 
 
 def running_mean(x: np.ndarray, n: int) -> np.ndarray:
@@ -177,7 +188,7 @@ def consistency_figure(estimates, log, path, title: str = "", window: int = 50) 
             drawn = True
     if drawn:
         ax.axhline(3.0, color="k", lw=0.8, ls="--", label="expected (3)")
-        ax.set_yscale("log")
+        _plain_log_axis(ax)
         ax.legend(loc="upper right", fontsize=8)
     else:
         ax.text(0.5, 0.5, "no truth pose in this log: NEES cannot be computed", ha="center", va="center",
@@ -193,7 +204,7 @@ def consistency_figure(estimates, log, path, title: str = "", window: int = 50) 
                 ax.plot(inn.t - t0, running_mean(inn.nis, window) / inn.dof, color=c, lw=1,
                         label=f"{name} (dof {inn.dof})")
         ax.axhline(1.0, color="k", lw=0.8, ls="--", label="expected")
-        ax.set_yscale("log")
+        _plain_log_axis(ax)
         ax.set_ylim(bottom=1e-2)  # the first few running means can be ~0
         ax.legend(loc="upper right", fontsize=8)
     ax.set_ylabel(f"{ekf.method if ekf else 'EKF'} NIS / dof")
