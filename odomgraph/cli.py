@@ -157,6 +157,25 @@ def slip_spec(value):
         raise typer.BadParameter(str(exc)) from None
 
 
+def _names(value, n: int, what: str) -> tuple:
+    if isinstance(value, tuple):
+        return value
+    parts = tuple(v.strip() for v in str(value).split(","))
+    if len(parts) != n or not all(parts):
+        raise typer.BadParameter(f"expected {what}, got {value!r}")
+    return parts
+
+
+def _one_or_two(value) -> tuple:
+    """One positive number or two ("2000" or "2000,2010"), as (left, right)."""
+    if isinstance(value, tuple):
+        return value
+    vals = Numbers(2, "left,right")(value) if "," in str(value) else Numbers(1, "one value")(value) * 2
+    if not all(v > 0 for v in vals):
+        raise typer.BadParameter(f"ticks per metre must be positive, got {value!r}")
+    return vals
+
+
 class AtName(str, Enum):
     truth = "truth"
     gps = "gps"
@@ -680,6 +699,13 @@ def import_(
     imu_axis: Annotated[str, typer.Option(
         help="rosbag: the IMU axis that measures yaw: auto (the mounting in /tf_static, else the signed axis "
              "that follows the wheels' turn rate), x, y, z, -x, -y or -z.")] = "auto",
+    tick_topics: Annotated[Optional[tuple], typer.Option(
+        parser=lambda v: _names(v, 2, "LEFT,RIGHT"), metavar="LEFT,RIGHT",
+        help="rosbag: the wheels as two std_msgs integer tick counters (default: the pair named left/right "
+             "when the bag has no other wheel topic); stamped with the receive times.")] = None,
+    ticks_per_meter: Annotated[Optional[tuple], typer.Option(
+        parser=lambda v: _one_or_two(v), metavar="TPM[,TPM]",
+        help="rosbag: nominal ticks per metre of the tick counters, one value or left,right.")] = None,
     gps_lever_arm: Annotated[Optional[tuple], typer.Option(
         parser=Numbers(2, "x,y"), metavar="X,Y",
         help="rosbag: GPS antenna 'x,y' in the robot frame [m] (default: from /tf_static, else 0,0).")] = None,
@@ -717,7 +743,8 @@ def import_(
         if track_width is None:
             raise OdomgraphError("import rosbag needs --track-width (the nominal robot) [m]")
         log = import_rosbag(source, wheel_topic, left_joint, right_joint, wheel_radius, track_width,
-                            gps_topic, imu_topic, gps_lever_arm=gps_lever_arm, imu_axis=imu_axis, stamps=stamps)
+                            gps_topic, imu_topic, gps_lever_arm=gps_lever_arm, imu_axis=imu_axis, stamps=stamps,
+                            tick_topics=tick_topics, ticks_per_meter=ticks_per_meter)
     else:
         from odomgraph.io.importers.librsf import import_librsf
         log = import_librsf(source, ground_truth)

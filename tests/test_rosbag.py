@@ -73,6 +73,15 @@ def _write_bag(path, log, wheels="joints", imu_axis="z", tf_lever=None, no_fix_e
                                                       position=np.array([0.3, al, ar]), velocity=np.array([], float),
                                                       effort=np.array([], float))
                 w.write(cj, at(t), ser(msg, "sensor_msgs/msg/JointState"))
+        elif wheels == "ticks":
+            # bare std_msgs/Int16 counters, as a microcontroller publishes them: no header, the
+            # right one 3 ms after the left, both wrapping at 2^15 (about 16 m at 2000 ticks/m)
+            cl = w.add_connection("/wheel/left_ticks", "std_msgs/msg/Int16", typestore=ts)
+            cr = w.add_connection("/wheel/right_ticks", "std_msgs/msg/Int16", typestore=ts)
+            wrap = lambda c: ((c + 2**15) % 2**16) - 2**15
+            for t, a, b in zip(e.t, np.cumsum(e.ticks_left), np.cumsum(e.ticks_right)):
+                w.write(cl, at(t), ser(T["std_msgs/msg/Int16"](data=int(wrap(int(a)))), "std_msgs/msg/Int16"))
+                w.write(cr, at(t + 0.003), ser(T["std_msgs/msg/Int16"](data=int(wrap(int(b)))), "std_msgs/msg/Int16"))
         elif wheels == "twist":
             ct = w.add_connection("/cmd_vel_measured", "geometry_msgs/msg/TwistStamped", typestore=ts)
             dt = np.diff(e.t)
@@ -421,3 +430,31 @@ def test_a_real_clock_bag_keeps_every_nanosecond(tmp_path):
     assert (a.t_origin, b.t_origin) == (0, 1_700_000_000)
     for name in ("wheel_speeds", "gps", "gyro"):
         np.testing.assert_array_equal(getattr(b, name).t, getattr(a, name).t)
+
+
+@pytest.mark.parametrize("storage", ["ros1", "mcap"])
+def test_tick_counters_import_as_encoders_and_calibrate_back(tmp_path, storage):
+    """Two std_msgs/Int16 tick counters (no header, wrapping every 65536
+    ticks, the right one published 3 ms after the left) are found by their
+    names, paired, unwrapped into encoders.csv ticks equal to the simulated
+    ones, and calibrate back to 0.5 %."""
+    src = simulate(paper(60).with_(slips=()), 9)
+    p = tmp_path / ("ticks.bag" if storage == "ros1" else "ticks")
+    _write_bag(p, src, wheels="ticks", imu_axis="z", storage=storage, tf_lever=(-0.45, 0.0))
+    log = import_rosbag(p, track_width=src.robot.track_width, ticks_per_meter=src.robot.ticks_per_meter_left)
+    assert any("tick counters /wheel/left_ticks and /wheel/right_ticks" in n for n in log.notes)
+    assert log.wheel_speeds is None and log.encoders is not None
+    e = src.encoders
+    assert np.abs(np.cumsum(e.ticks_left)).max() > 2**16    # it did wrap, more than once
+    np.testing.assert_array_equal(log.encoders.ticks_left[1:], e.ticks_left[1:])
+    np.testing.assert_array_equal(log.encoders.ticks_right[1:], e.ticks_right[1:])
+    np.testing.assert_allclose(log.encoders.t, e.t + 0.0015, atol=1e-9)   # the pair's mean time
+    assert log.robot.ticks_per_meter_left == src.robot.ticks_per_meter_left
+    est = estimate(log, Method.batch, Schedule(None))
+    for got, true in zip(est.mean[-1, 8:11], src.truth_scales):
+        assert got == pytest.approx(true, rel=0.005)
+    with pytest.raises(LogFormatError, match="need a positive --ticks-per-meter"):
+        import_rosbag(p, track_width=0.6)
+    topics, _ = __import__("odomgraph.io.importers.rosbag", fromlist=["list_topics"]).list_topics(p)
+    roles = {t.topic: t.role for t in topics}
+    assert roles["/wheel/left_ticks"] == "wheels (left ticks)" and roles["/wheel/right_ticks"] == "wheels (right ticks)"

@@ -39,12 +39,15 @@ import numpy as np
 from odomgraph.errors import LogFormatError
 from odomgraph.io.csvtable import ORIGIN_ABOVE
 from odomgraph.io.geodesy import latlon_to_local
-from odomgraph.io.log import Gps, Gyro, Log, WheelSpeeds
+from odomgraph.io.log import Encoders, Gps, Gyro, Log, WheelSpeeds
 from odomgraph.io.robot import RobotConfig
 
 WHEEL_TYPES = {"sensor_msgs/msg/JointState": "joints", "nav_msgs/msg/Odometry": "odometry",
                "geometry_msgs/msg/TwistStamped": "twist"}
 IMU_TYPE, GPS_TYPE, TF_TYPE = "sensor_msgs/msg/Imu", "sensor_msgs/msg/NavSatFix", "tf2_msgs/msg/TFMessage"
+#: Bare integer tick counters (std_msgs), with the width at which they wrap (None: never).
+TICK_TYPES = {"std_msgs/msg/Int16": 16, "std_msgs/msg/UInt16": 16, "std_msgs/msg/Int32": 32,
+              "std_msgs/msg/UInt32": 32, "std_msgs/msg/Int64": None, "std_msgs/msg/UInt64": None}
 #: Topic names that are never picked as wheels by themselves: fused, not wheel, odometry.
 NOT_WHEELS = ("filtered", "ekf", "fused", "global", "gps", "visual", "vo", "slam")
 AXES = ("x", "y", "z")
@@ -103,6 +106,50 @@ def _candidates(conns) -> dict[str, list]:
     return out
 
 
+def _tick_pair(conns) -> tuple[str, str] | None:
+    """(left, right) tick-counter topics: the one integer topic with "left" in
+    its name and the one with "right", or None when that is not clear."""
+    ints = [c for c in conns if c.msgtype in TICK_TYPES and c.msgcount > 0]
+    ls = sorted({c.topic for c in ints if "left" in c.topic.lower()})
+    rs = sorted({c.topic for c in ints if "right" in c.topic.lower()})
+    return (ls[0], rs[0]) if len(ls) == 1 and len(rs) == 1 else None
+
+
+def _unwrap_counts(c: np.ndarray, bits: int | None) -> np.ndarray:
+    """Cumulative tick counts with the counter's wrap-around removed (a 16-bit
+    counter wraps every 65536 ticks: a few metres on a small robot)."""
+    c = np.asarray(c, dtype=np.int64)
+    if bits is None or c.size < 2:
+        return c
+    full, half = 1 << bits, 1 << (bits - 1)
+    d = (np.diff(c) + half) % full - half
+    return np.concatenate([[c[0]], c[0] + np.cumsum(d)])
+
+
+def _encoders_from_ticks(bag, left: tuple, right: tuple, notes: list) -> Encoders:
+    """Encoders from two counters ((t, count, bits) each): a left message and
+    the right one nearest to it (within half the left period) make a row,
+    stamped at their mean time, with the ticks counted since the row before."""
+    tl, cl, bl = left
+    tr, cr, br = right
+    if len(tl) < 3 or len(tr) < 3:
+        raise LogFormatError(bag, "tick topics: fewer than three messages on a wheel")
+    cl, cr = _unwrap_counts(cl, bl), _unwrap_counts(cr, br)
+    half = 0.5 * float(np.median(np.diff(tl)))
+    j = np.clip(np.searchsorted(tr, tl), 1, len(tr) - 1)
+    j = np.where(np.abs(tr[j - 1] - tl) <= np.abs(tr[j] - tl), j - 1, j)
+    ok = np.abs(tr[j] - tl) <= half
+    ok &= np.concatenate([[True], np.diff(j) > 0])    # each right message in one row
+    if ok.sum() < 0.5 * len(tl):
+        raise LogFormatError(bag, f"tick topics: only {int(ok.sum())} of {len(tl)} left messages have a right one "
+                                  "within half a period; the counters are not published together")
+    if (~ok).any():
+        notes.append(f"tick topics: {int((~ok).sum())} left messages without a right one at the same time dropped")
+    t = 0.5 * (tl[ok] + tr[j[ok]])
+    a, b = cl[ok], cr[j[ok]]
+    return Encoders(t, np.concatenate([[0], np.diff(a)]).astype(float), np.concatenate([[0], np.diff(b)]).astype(float))
+
+
 def _pick(cands: dict[str, list]) -> dict[str, str | None]:
     """{role: topic or None}: the one candidate of each role, or None when
     there is none or the choice is ambiguous. Wheel odometry is preferred to
@@ -126,7 +173,11 @@ def list_topics(bag: Path | str) -> tuple[list[Topic], list[str]]:
     try:
         with _reader(bag) as reader:
             conns = list(reader.connections)
-            picks = _pick(_candidates(conns))
+            cands = _candidates(conns)
+            picks = _pick(cands)
+            pair = _tick_pair(conns) if not cands["wheels"] else None
+            if pair:
+                picks["wheels (left ticks)"], picks["wheels (right ticks)"] = pair
             span = max(reader.duration * 1e-9, 1e-9)
             by_topic: dict[str, list] = {}
             for c in conns:
@@ -187,7 +238,8 @@ def import_rosbag(bag: Path | str, wheel_topic: str | None = None, left_joint: s
                   right_joint: str | None = None, wheel_radius: float | None = None, track_width: float | None = None,
                   gps_topic: str | None = None, imu_topic: str | None = None, gyro_sigma: float = 0.01,
                   encoder_sigma=(0.005, 0.01), gps_lever_arm=None, imu_axis: str = "auto",
-                  stamps: str = "header") -> Log:
+                  stamps: str = "header", tick_topics: tuple[str, str] | None = None,
+                  ticks_per_meter: float | tuple[float, float] | None = None) -> Log:
     """Import wheels (and GPS and gyro when the bag has them) from a bag; see the module doc.
 
     Topics left None are picked by type when unambiguous ("" turns a sensor
@@ -198,7 +250,11 @@ def import_rosbag(bag: Path | str, wheel_topic: str | None = None, left_joint: s
     of x, y, z, -x, -y, -z; "auto" takes the robot's vertical axis from
     /tf_static (base_link -> the IMU's frame) when it is there, else the
     axis the data show. ``stamps``: "header" (the sensors' clock) or
-    "receive" (the time the bag recorded each message)."""
+    "receive" (the time the bag recorded each message). ``tick_topics``:
+    (left, right) std_msgs integer tick counters, picked by name ("left",
+    "right") when the bag has no other wheel topic; they need
+    ``ticks_per_meter`` (one value or (left, right)) and, having no header,
+    are stamped with the bag's receive times."""
     bag = Path(bag)
     if track_width is None or track_width <= 0:
         raise LogFormatError(bag, "import rosbag needs a positive --track-width (the nominal robot) [m]")
@@ -214,12 +270,18 @@ def import_rosbag(bag: Path | str, wheel_topic: str | None = None, left_joint: s
         with _reader(bag) as reader:
             conns = list(reader.connections)
             present = {c.topic for c in conns}
-            missing = {t for t in (wheel_topic, gps_topic, imu_topic) if t} - present
+            missing = {t for t in (wheel_topic, gps_topic, imu_topic, *(tick_topics or ())) if t} - present
             if missing:
                 raise LogFormatError(bag, f"topic(s) {sorted(missing)} not in the bag (it has {sorted(present)}; "
                                           "odomgraph import rosbag BAG --list shows them)")
             cands = _candidates(conns)
             picks = _pick(cands)
+            if tick_topics is None and wheel_topic is None and not cands["wheels"]:
+                tick_topics = _tick_pair(conns)
+                if tick_topics:
+                    notes.append(f"wheels: picked the tick counters {tick_topics[0]} and {tick_topics[1]}")
+            if tick_topics:
+                wheel_topic = ""      # the counters are the wheels
             chosen = {}
             for role, given in (("wheels", wheel_topic), ("imu", imu_topic), ("gps", gps_topic)):
                 if given is None:
@@ -233,25 +295,38 @@ def import_rosbag(bag: Path | str, wheel_topic: str | None = None, left_joint: s
                     if given:
                         notes.append(f"{role}: picked {given}")
                 chosen[role] = given or None
-            if chosen["wheels"] is None:
-                raise LogFormatError(bag, "no wheel topic (sensor_msgs/JointState, nav_msgs/Odometry or "
-                                          "geometry_msgs/TwistStamped) in the bag; --list shows what it has")
             types = {c.topic: c.msgtype for c in conns}
-            if types[chosen["wheels"]] not in WHEEL_TYPES:
+            if tick_topics:
+                kind = "ticks"
+                bad = [t for t in tick_topics if types[t] not in TICK_TYPES]
+                if bad:
+                    raise LogFormatError(bag, f"{bad[0]}: a {types[bad[0]]} is not a std_msgs integer tick counter")
+                tpm = (ticks_per_meter,) * 2 if isinstance(ticks_per_meter, (int, float)) else ticks_per_meter
+                if tpm is None or len(tpm) != 2 or not all(v and v > 0 for v in tpm):
+                    raise LogFormatError(bag, f"the tick counters {list(tick_topics)} need a positive "
+                                              "--ticks-per-meter (nominal, one value or left,right)")
+                notes.append("tick counters carry no header: stamped with the bag's receive times")
+            elif chosen["wheels"] is None:
+                raise LogFormatError(bag, "no wheel topic (sensor_msgs/JointState, nav_msgs/Odometry, "
+                                          "geometry_msgs/TwistStamped or left/right std_msgs tick counters) in "
+                                          "the bag; --list shows what it has")
+            elif types[chosen["wheels"]] not in WHEEL_TYPES:
                 raise LogFormatError(bag, f"{chosen['wheels']}: a {types[chosen['wheels']]} cannot be wheels")
-            kind = WHEEL_TYPES[types[chosen["wheels"]]]
+            else:
+                kind = WHEEL_TYPES[types[chosen["wheels"]]]
             for role, want in (("imu", IMU_TYPE), ("gps", GPS_TYPE)):
                 if chosen[role] and types[chosen[role]] != want:
                     raise LogFormatError(bag, f"{chosen[role]}: a {types[chosen[role]]}, not a {want}")
             if kind == "joints" and (wheel_radius is None or wheel_radius <= 0):
                 raise LogFormatError(bag, f"{chosen['wheels']} holds JointState wheels: give a positive "
                                           "--wheel-radius [m]")
-            use = [c for c in conns if c.topic in chosen.values()]
+            use = [c for c in conns if c.topic in chosen.values() or c.topic in (tick_topics or ())]
+            ticks = {t: [] for t in tick_topics or ()}
             joints = None
             origin_ns = None
             for conn, t_rx, raw in reader.messages(connections=use):
                 msg = reader.deserialize(raw, conn.msgtype)
-                ns = int(t_rx) if stamps == "receive" else _stamp_ns(msg)
+                ns = int(t_rx) if stamps == "receive" or conn.topic in ticks else _stamp_ns(msg)
                 if origin_ns is None:
                     # A real clock counts from the first whole second (Log.t_origin): the
                     # difference of integer nanoseconds is exact, and so is every interval.
@@ -271,6 +346,8 @@ def import_rosbag(bag: Path | str, wheel_topic: str | None = None, left_joint: s
                     else:
                         tw = msg.twist.twist if kind == "odometry" else msg.twist
                         wheels.append((stamp, tw.linear.x, tw.angular.z, np.nan, np.nan))
+                elif conn.topic in ticks:
+                    ticks[conn.topic].append((stamp, int(msg.data)))
                 elif conn.topic == chosen["gps"]:
                     fix_frame = msg.header.frame_id.lstrip("/")
                     if msg.status.status < 0:
@@ -288,8 +365,20 @@ def import_rosbag(bag: Path | str, wheel_topic: str | None = None, left_joint: s
         raise
     except Exception as exc:  # rosbags raises its own types for unreadable bags
         raise LogFormatError(bag, f"cannot read the bag: {exc}") from None
-    ws = _wheel_speeds(bag, chosen["wheels"], kind, wheels, wheel_radius, track_width)
-    if kind != "joints":
+    enc = None
+    if kind == "ticks":
+        sides = []
+        for topic in tick_topics:
+            rows = sorted(ticks[topic])
+            sides.append((np.array([r[0] for r in rows]), np.array([r[1] for r in rows], dtype=np.int64),
+                          TICK_TYPES[types[topic]]))
+        enc = _encoders_from_ticks(bag, sides[0], sides[1], notes)
+        dt = np.diff(enc.t)
+        # the wheels' speeds, for the IMU axis check below
+        ws = WheelSpeeds(enc.t[1:], enc.ticks_left[1:] / (tpm[0] * dt), enc.ticks_right[1:] / (tpm[1] * dt))
+    else:
+        ws = _wheel_speeds(bag, chosen["wheels"], kind, wheels, wheel_radius, track_width)
+    if kind not in ("joints", "ticks"):
         notes.append(f"wheels from the {'odometry twist' if kind == 'odometry' else 'TwistStamped'} of "
                      f"{chosen['wheels']} through the nominal track "
                      f"({track_width:g} m): this assumes that odometry came from the wheels alone")
@@ -322,11 +411,13 @@ def import_rosbag(bag: Path | str, wheel_topic: str | None = None, left_joint: s
             if line:
                 warnings.append(line)
         gyro = Gyro(tg, om)
-    robot = RobotConfig(ticks_per_meter_left=1.0, ticks_per_meter_right=1.0, track_width=track_width,
+    robot = RobotConfig(ticks_per_meter_left=float(tpm[0]) if enc is not None else 1.0,
+                        ticks_per_meter_right=float(tpm[1]) if enc is not None else 1.0, track_width=track_width,
                         encoder_sigma=tuple(encoder_sigma), gps_sigma=gps_sigma, gps_origin=origin,
                         gps_lever_arm=tuple(float(v) for v in (gps_lever_arm or (0.0, 0.0))),
                         gyro_sigma=gyro_sigma)
-    return Log(robot=robot, wheel_speeds=ws, gps=gps, gyro=gyro, notes=tuple(notes), warnings=tuple(warnings),
+    return Log(robot=robot, encoders=enc, wheel_speeds=None if enc is not None else ws, gps=gps, gyro=gyro,
+               notes=tuple(notes), warnings=tuple(warnings),
                t_origin=(origin_ns or 0) // 1_000_000_000)
 
 
