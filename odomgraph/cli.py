@@ -353,7 +353,7 @@ def simulate(
         parser=Numbers(2, "a,b"), metavar="A,B", help="Wheel-speed noise 'a,b': a + b|v| m/s (eq. 41).")] = None,
     scales: Annotated[Optional[tuple], typer.Option(
         parser=Numbers(3, "left,right,track"), metavar="L,R,T", help="True scale factors 'left,right,track'.")] = None,
-    slip: Annotated[Optional[list], typer.Option(parser=slip_spec, metavar="WHEEL:START:END:SPEED",
+    slip: Annotated[Optional[list[str]], typer.Option(parser=slip_spec, metavar="WHEEL:START:END:SPEED",
         help="Slip event 'wheel:start:end:speed' (s, s, m/s); repeat for more. Replaces the scenario's.")] = None,
     no_slip: Annotated[bool, typer.Option("--no-slip", help="No slip events at all.")] = False,
     initial: Annotated[bool, typer.Option(help="Write the true start pose as robot.toml [initial].")] = False,
