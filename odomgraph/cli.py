@@ -473,7 +473,7 @@ def estimate(
         "--time-offset", help="Estimate how late the GPS stamps are against the wheels, and apply it "
                               "(without it, a clear offset is only warned about).")] = False,
     rate: Annotated[Optional[float], typer.Option(
-        min=1e-6, help="Write the states at this regular rate [Hz] (smoother rows are interpolated along "
+        min=1e-6, max=1000.0, help="Write the states at this regular rate [Hz] (smoother rows are interpolated along "
                        "the arc between keyframes, with their sigma), for tools such as evo.")] = None,
     at: Annotated[Optional[AtName], typer.Option(
         help="Write the states at the truth's or the GPS fixes' times (interpolated as with --rate).")] = None,

@@ -64,7 +64,10 @@ def test_rate_writes_regular_rows_and_keeps_the_keyframes(log, tmp_path):
     s = estimate_to_dir(log, tmp_path / "r", Method.isam2, Schedule(20.0), rate=20.0)
     t = np.loadtxt(tmp_path / "r" / "states.csv", delimiter=",", skiprows=1)[:, 0]
     np.testing.assert_allclose(np.diff(t), 0.05, atol=2e-6)
+    # on whole multiples of 1/rate, where a 20 Hz truth has its samples too: evo matches every row
+    np.testing.assert_allclose(t * 20, np.round(t * 20), atol=2e-5)
     assert s["rows"]["rate_hz"] == 20.0 and s["rows"]["n"] == len(t)
+    assert _evo_ape(tmp_path / "r") == pytest.approx(s["rows"]["rms_position_m"], rel=1e-3)
     # online.csv stays the causal estimate at its own keyframes
     online = np.loadtxt(tmp_path / "r" / "online.csv", delimiter=",", skiprows=1)
     assert len(online) == s["n_steps"]
@@ -99,5 +102,8 @@ def test_rate_and_at_are_checked(log, tmp_path):
         estimate_to_dir(log, tmp_path / "x", Method.ekf, Schedule(20.0), rate=5.0, at="gps")
     with pytest.raises(OdomgraphError, match="--at must be truth or gps"):
         estimate_to_dir(log, tmp_path / "x", Method.ekf, Schedule(20.0), at="mocap")
+    for bad in (float("inf"), 1e9):
+        with pytest.raises(OdomgraphError, match="--rate must be between 0 and 1000 Hz"):
+            estimate_to_dir(log, tmp_path / "x", Method.ekf, Schedule(20.0), rate=bad)
     with pytest.raises(OdomgraphError, match="the log has no truth"):
         estimate_to_dir(log.with_(truth=None), tmp_path / "x", Method.ekf, Schedule(20.0), at="truth")

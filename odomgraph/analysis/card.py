@@ -153,8 +153,9 @@ def card_html(label: str, params: list[Parameter], summary: dict, reference_note
              f"Compared against: {esc(reference_note)}.</p>",
              "<table id='parameters'><tr><th>parameter</th><th>nominal</th><th>estimate</th><th>1σ</th>"
              "<th>unit</th><th>determined</th><th>truth</th><th>error / σ</th></tr>", *rows, "</table>",
-             "<p>robot.toml (<code>odomgraph calibrate</code> checks these against held-out data before "
-             "it writes them):</p>", f"<pre id='snippet'>{esc(snippet(params))}</pre>"]
+             *(["<p>robot.toml (<code>odomgraph calibrate</code> checks these against held-out data before "
+                "it writes them):</p>", f"<pre id='snippet'>{esc(snippet(params))}</pre>"] if level != "bad" else
+               ["<p>No robot.toml snippet: a result that is not trustworthy is not one to drive on.</p>"])]
     if used:
         cells = "".join(f"<tr><td>{esc(s)}</td><td>{n}</td><td>{rej.get(s, 0)}</td></tr>" for s, n in used.items())
         parts.append("<table><tr><th>sensor</th><th>measurements</th><th>rejected</th></tr>" + cells + "</table>")

@@ -78,7 +78,20 @@ def resampled(est: Estimate, times: np.ndarray) -> Estimate:
                    update_times=None)
 
 
+#: Highest --rate [Hz], and most rows it may write: beyond, the request is a typo, not a plan.
+MAX_RATE_HZ = 1000.0
+MAX_ROWS = 10_000_000
+
+
 def regular_times(est: Estimate, rate_hz: float) -> np.ndarray:
-    """Times at ``rate_hz`` from the estimate's first row to its last."""
-    n = int(np.floor((est.t[-1] - est.t[0]) * rate_hz + 1e-9)) + 1
-    return est.t[0] + np.arange(n) / rate_hz
+    """Times at ``rate_hz`` inside the estimate's span, on whole multiples of
+    1/rate of the log's clock (t_origin is a whole second), so that they meet
+    a truth or a reference sampled at the same rate (evo associates within
+    0.01 s)."""
+    from odomgraph.errors import OdomgraphError
+    if not (np.isfinite(rate_hz) and 0 < rate_hz <= MAX_RATE_HZ):
+        raise OdomgraphError(f"--rate must be between 0 and {MAX_RATE_HZ:g} Hz, got {rate_hz!r}")
+    k0, k1 = np.ceil(est.t[0] * rate_hz - 1e-9), np.floor(est.t[-1] * rate_hz + 1e-9)
+    if k1 - k0 + 1 > MAX_ROWS:
+        raise OdomgraphError(f"--rate {rate_hz:g} Hz would write {k1 - k0 + 1:.3g} rows (at most {MAX_ROWS:g})")
+    return np.arange(k0, k1 + 1) / rate_hz

@@ -76,6 +76,18 @@ def _reader(bag: Path):
         raise LogFormatError(bag, "reading bags needs the 'rosbags' package: pip install 'odomgraph[rosbag]'") from None
     if not bag.exists():
         raise LogFormatError(bag, "bag does not exist")
+    if bag.is_file() and bag.suffix != ".bag":
+        with open(bag, "rb") as f:
+            head = f.read(13)
+        if head == b"#ROSBAG V2.0\n":
+            # rosbags tells ROS 1 from ROS 2 by the name: read it through a *.bag link
+            import tempfile
+            link = Path(tempfile.mkdtemp(prefix="odomgraph-bag-")) / (bag.name + ".bag")
+            link.symlink_to(bag.resolve())
+            bag = link
+        else:
+            raise LogFormatError(bag, "is a file but not a ROS 1 bag (no '#ROSBAG V2.0' header); a ROS 2 bag is a "
+                                      "directory with metadata.yaml")
     return AnyReader([bag], default_typestore=get_typestore(Stores.ROS2_HUMBLE))
 
 
@@ -106,12 +118,17 @@ def _candidates(conns) -> dict[str, list]:
     return out
 
 
+def _tick_candidates(conns) -> tuple[list[str], list[str]]:
+    """The integer topics with "left" and with "right" in their names."""
+    ints = [c for c in conns if c.msgtype in TICK_TYPES and c.msgcount > 0]
+    return (sorted({c.topic for c in ints if "left" in c.topic.lower()}),
+            sorted({c.topic for c in ints if "right" in c.topic.lower()}))
+
+
 def _tick_pair(conns) -> tuple[str, str] | None:
     """(left, right) tick-counter topics: the one integer topic with "left" in
     its name and the one with "right", or None when that is not clear."""
-    ints = [c for c in conns if c.msgtype in TICK_TYPES and c.msgcount > 0]
-    ls = sorted({c.topic for c in ints if "left" in c.topic.lower()})
-    rs = sorted({c.topic for c in ints if "right" in c.topic.lower()})
+    ls, rs = _tick_candidates(conns)
     return (ls[0], rs[0]) if len(ls) == 1 and len(rs) == 1 else None
 
 
@@ -127,27 +144,40 @@ def _unwrap_counts(c: np.ndarray, bits: int | None) -> np.ndarray:
 
 
 def _encoders_from_ticks(bag, left: tuple, right: tuple, notes: list) -> Encoders:
-    """Encoders from two counters ((t, count, bits) each): a left message and
-    the right one nearest to it (within half the left period) make a row,
-    stamped at their mean time, with the ticks counted since the row before."""
+    """Encoders from two counters ((t, count, bits) each), on the rows of the
+    sparser one. Counters published together (each message of one within a
+    quarter period of one of the other) pair exactly, stamped at the pair's
+    mean time. Otherwise the denser counter's cumulative count is
+    interpolated to the sparser one's times and rounded to whole ticks (at
+    most half a tick of quantisation per row), and a note says so: pairing
+    readings up to half a period apart would give each wheel a different
+    interval, and a wrong calibration."""
     tl, cl, bl = left
     tr, cr, br = right
     if len(tl) < 3 or len(tr) < 3:
         raise LogFormatError(bag, "tick topics: fewer than three messages on a wheel")
     cl, cr = _unwrap_counts(cl, bl), _unwrap_counts(cr, br)
-    half = 0.5 * float(np.median(np.diff(tl)))
-    j = np.clip(np.searchsorted(tr, tl), 1, len(tr) - 1)
-    j = np.where(np.abs(tr[j - 1] - tl) <= np.abs(tr[j] - tl), j - 1, j)
-    ok = np.abs(tr[j] - tl) <= half
-    ok &= np.concatenate([[True], np.diff(j) > 0])    # each right message in one row
-    if ok.sum() < 0.5 * len(tl):
-        raise LogFormatError(bag, f"tick topics: only {int(ok.sum())} of {len(tl)} left messages have a right one "
-                                  "within half a period; the counters are not published together")
-    if (~ok).any():
-        notes.append(f"tick topics: {int((~ok).sum())} left messages without a right one at the same time dropped")
-    t = 0.5 * (tl[ok] + tr[j[ok]])
-    a, b = cl[ok], cr[j[ok]]
-    return Encoders(t, np.concatenate([[0], np.diff(a)]).astype(float), np.concatenate([[0], np.diff(b)]).astype(float))
+    swap = len(tr) < len(tl)           # rows on the sparser counter
+    (ta, ca), (tb, cb) = ((tr, cr), (tl, cl)) if swap else ((tl, cl), (tr, cr))
+    quarter = 0.25 * float(min(np.median(np.diff(ta)), np.median(np.diff(tb))))
+    j = np.clip(np.searchsorted(tb, ta), 1, len(tb) - 1)
+    j = np.where(np.abs(tb[j - 1] - ta) <= np.abs(tb[j] - ta), j - 1, j)
+    ok = (np.abs(tb[j] - ta) <= quarter) & np.concatenate([[True], np.diff(j) > 0])
+    if ok.mean() >= 0.95 and len(tb) <= 1.05 * len(ta):
+        if (~ok).any():
+            notes.append(f"tick topics: {int((~ok).sum())} messages without a partner at the same time dropped")
+        t, a, b = 0.5 * (ta[ok] + tb[j[ok]]), ca[ok], cb[j[ok]]
+    else:
+        inside = (ta >= tb[0]) & (ta <= tb[-1])
+        t, a = ta[inside], ca[inside]
+        b = np.rint(np.interp(t, tb, cb.astype(float))).astype(np.int64)
+        notes.append(f"tick topics at different rates or times ({len(tl)} left, {len(tr)} right messages): rows at "
+                     f"the {'right' if swap else 'left'} counter's times, the other's count interpolated")
+    if len(t) < 3:
+        raise LogFormatError(bag, "tick topics: the two counters do not overlap in time")
+    left_c, right_c = (b, a) if swap else (a, b)
+    return Encoders(t, np.concatenate([[0], np.diff(left_c)]).astype(float),
+                    np.concatenate([[0], np.diff(right_c)]).astype(float))
 
 
 def _pick(cands: dict[str, list]) -> dict[str, str | None]:
@@ -280,6 +310,12 @@ def import_rosbag(bag: Path | str, wheel_topic: str | None = None, left_joint: s
                 tick_topics = _tick_pair(conns)
                 if tick_topics:
                     notes.append(f"wheels: picked the tick counters {tick_topics[0]} and {tick_topics[1]}")
+                else:
+                    ls, rs = _tick_candidates(conns)
+                    if ls or rs:
+                        raise LogFormatError(bag, f"integer topics that may be tick counters: left {ls or 'none'}, "
+                                                  f"right {rs or 'none'}; not one of each: give --tick-topics "
+                                                  "LEFT,RIGHT")
             if tick_topics:
                 wheel_topic = ""      # the counters are the wheels
             chosen = {}
@@ -396,6 +432,10 @@ def import_rosbag(bag: Path | str, wheel_topic: str | None = None, left_joint: s
             gps = Gps(tf, x, y)
         if gps_lever_arm is None:
             gps_lever_arm = _lever_from_tf(frames, fix_frame, notes)
+            if gps_lever_arm == (0.0, 0.0) and not any("lever arm (" in n for n in notes):
+                warnings.append(f"{chosen['gps']}: the GPS antenna's lever arm is unknown (no /tf_static for frame "
+                                f"{fix_frame!r}) and taken as (0, 0); an antenna off the robot's centre then looks "
+                                "like a GPS time offset or a wrong track: give --gps-lever-arm X,Y")
     gyro = None
     if rates:
         g = np.array(rates)
