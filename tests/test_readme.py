@@ -82,7 +82,7 @@ def test_the_python_api_example_runs_and_its_numbers_hold(tmp_path, monkeypatch)
     robot = ns["robot"]
     assert robot.track_width == pytest.approx(log.robot.track_width * true_track, rel=0.01)
     assert ns["report"]["held_out"]["calibrated"] < ns["report"]["held_out"]["nominal"]
-    assert 0 < ns["batch_rms"] < 0.05
+    assert 0.002 < ns["batch_rms"] < 0.025          # measured 0.0093 m
 
 
 def test_no_results_file_is_older_than_the_code_it_ran():
