@@ -1,6 +1,7 @@
 """Helpers shared by the benchmark scripts: where results go, and the machine."""
 from __future__ import annotations
 
+import ast
 import json
 import os
 import platform
@@ -70,12 +71,69 @@ def sources() -> dict[str, str]:
     return dict(sorted(out.items()))
 
 
-def save(name: str, data: dict, markdown: str) -> None:
+def _module_file(root: Path, name: str) -> Path | None:
+    """The project file of module ``name`` (odomgraph.factors is factors/);
+    the benchmarks' and tests' own modules are followed for what they import."""
+    parts = name.split(".")
+    if parts[:2] == ["odomgraph", "factors"]:
+        parts = ["factors", *parts[2:]]
+    elif parts[0] not in ("odomgraph", "factors", "benchmarks", "tests"):
+        return None
+    base = root.joinpath(*parts)
+    for f in (base.with_suffix(".py"), base / "__init__.py"):
+        if f.is_file():
+            return f
+    return None
+
+
+def static_sources(*paths: Path) -> dict[str, str]:
+    """{path: code_hash} of every project file that ``paths`` import, read
+    from their syntax trees (every import statement, also those inside
+    functions), transitively. For benchmarks whose work runs in other
+    processes (a pool, a pytest subprocess), where this process's modules
+    are not what ran; it errs on the side of listing too much."""
+    root = RESULTS.parent.parent
+    seen: set[Path] = set()
+    todo = [Path(p).resolve() for p in paths]
+    while todo:
+        f = todo.pop()
+        if f in seen:
+            continue
+        seen.add(f)
+        for node in ast.walk(ast.parse(f.read_text(encoding="utf-8"))):
+            names = []
+            if isinstance(node, ast.Import):
+                names = [a.name for a in node.names]
+            elif isinstance(node, ast.ImportFrom) and node.module and not node.level:
+                names = [node.module] + [f"{node.module}.{a.name}" for a in node.names]
+            for n in names:
+                # a package's __init__ runs too when a submodule is imported
+                for k in range(1, n.count(".") + 2):
+                    g = _module_file(root, ".".join(n.split(".")[:k]))
+                    if g is not None and g.resolve() not in seen:
+                        todo.append(g.resolve())
+    out = {}
+    for f in seen:
+        rel = f.relative_to(root)
+        if rel.parts[0] in ("odomgraph", "factors"):
+            out[str(rel)] = code_hash(f)
+    return dict(sorted(out.items()))
+
+
+def save(name: str, data: dict, markdown: str, ran: tuple[Path, ...] = ()) -> None:
     """Write results/<name>.json and results/<name>.md (and print the markdown).
     The JSON records the machine, the commit and the hashes of the sources
-    the run imported."""
+    the run imported, and of what the benchmark's script and the files
+    ``ran`` import (static_sources: the code that ran in other processes)."""
+    import sys
     RESULTS.mkdir(exist_ok=True)
-    data = {"machine": machine(), "sources": sources(), "sources_kind": "code", **data}
+    # The benchmark's own script too: its seeds, grid points or log lengths
+    # run in pools whose imports this process never sees.
+    main = getattr(sys.modules.get("__main__"), "__file__", None)
+    if main and Path(main).resolve().parent == RESULTS.parent:
+        ran = (Path(main), *ran)
+    src = {**static_sources(*ran), **sources()}
+    data = {"machine": machine(), "sources": dict(sorted(src.items())), "sources_kind": "code", **data}
     (RESULTS / f"{name}.json").write_text(json.dumps(data, indent=2) + "\n")
     (RESULTS / f"{name}.md").write_text(markdown + "\n")
     print(markdown)

@@ -59,7 +59,7 @@ Most frequent error classes (numbers, paths and quoted values removed):
 |---|---|
 {errs}{failure}"""
     save("fuzz", {"scale": args.scale, "cases": total, "wall_s": wall, "passed": passed, "targets": targets,
-                  "errors": tally["errors"]}, md)
+                  "errors": tally["errors"]}, md, ran=(Path(__file__).resolve().parent.parent / "tests" / "test_fuzz.py",))
     return 0 if passed else 1
 
 

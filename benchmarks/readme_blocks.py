@@ -1029,11 +1029,26 @@ def ekf_vectorised(results: Path) -> str:
         "both exist and the study uses the batched one only for N > 1.", "", _source("ekf_vectorised", d)])
 
 
+def report_size(results: Path) -> str:
+    d = _load("report_size", results)
+    t = d["targets"]
+    met = d["report_bytes"] < t["report_bytes"] and d["median_load_ms"] < t["load_ms"]
+    out = (f"A {d['minutes']:g}-minute log's page is {d['report_bytes'] / 1e6:.1f} MB and opens in "
+           f"{d['median_load_ms'] / 1e3:.2f} s in headless Chromium, every figure drawn (median of "
+           f"{len(d['load_ms'])}; targets {t['report_bytes'] / 1e6:.0f} MB and {t['load_ms'] / 1e3:.0f} s: "
+           f"{'both met' if met else 'missed'}).")
+    fb = d.get("full_bundle")
+    if fb:
+        out += (f" The page inlines plotly.js's cartesian bundle ({d['bundle_bytes'] / 1e6:.1f} MB); with the "
+                f"full bundle it was {fb['report_bytes'] / 1e6:.1f} MB and took {fb['median_load_ms'] / 1e3:.2f} s.")
+    return out + f"\n{_source('report_size', d)}"
+
+
 BLOCKS = {f.__name__: f for f in (
     ekf_accuracy, ekf_throughput, smoother_accuracy, faults, real_data_honesty,
     # README.md
     smoother_scale, wheel_speed_units, montecarlo_wall, montecarlo_findings, optiodom_transfer, librsf_limits,
-    faults_still, range_bias,
+    faults_still, range_bias, report_size,
     # benchmarks/README.md
     ekf_accuracy_table, ekf_throughput_table, smoother_accuracy_table, smoother_accuracy_findings, track_bias,
     smoother_consistency, speed_shrinkage, smoother_scaling_table, smoother_scaling_memory_peer, real_data_tables,

@@ -15,13 +15,15 @@ from benchmarks._common import RESULTS, code_hash
 
 
 def stale() -> dict[str, list[str]]:
-    """{results file: [changed or removed sources]}, or ["no record"]."""
+    """{results file: [changed or removed sources]}, or ["no record"] (also
+    for an empty record: a benchmark whose work ran in other processes and
+    recorded none of it, before _common.static_sources)."""
     root = RESULTS.parent.parent
     out = {}
     for p in sorted(RESULTS.glob("*.json")):
         data = json.loads(p.read_text())
         rec = data.get("sources")
-        if rec is None or data.get("sources_kind") != "code":
+        if not rec or data.get("sources_kind") != "code":
             out[p.name] = ["no record of the code it ran"]
             continue
         changed = []

@@ -1,5 +1,6 @@
 """Issue 18: the READMEs' results blocks are what benchmarks/results/ say."""
 import re
+from pathlib import Path
 
 import pytest
 
@@ -91,3 +92,31 @@ def test_no_results_file_is_older_than_the_code_it_ran():
     makes it stale: re-run it (python -m benchmarks.run_all --stale)."""
     from benchmarks.stale import stale
     assert stale() == {}, "stale results; run: python -m benchmarks.run_all --stale"
+
+
+def test_a_benchmark_records_the_code_its_pool_workers_ran(tmp_path, monkeypatch):
+    """smoother_scaling's log lengths run in spawned processes, so its own
+    process imports none of the estimators; the record must still name
+    them (static_sources), and an empty record counts as stale."""
+    import json
+
+    import benchmarks.stale as st
+    from benchmarks._common import code_hash, static_sources
+    root = Path(__file__).resolve().parent.parent
+    rec = static_sources(root / "benchmarks" / "smoother_scaling.py")
+    for f in ("odomgraph/estimators/incremental.py", "odomgraph/estimators/batch.py", "factors/encoder.py",
+              "odomgraph/sim/simulate.py"):
+        assert rec[f] == code_hash(root / f)
+    assert not any(k.startswith(("benchmarks", "tests")) for k in rec)
+    fuzz = static_sources(root / "tests" / "test_fuzz.py")
+    assert "odomgraph/cli.py" in fuzz and "odomgraph/io/csvtable.py" in fuzz
+    res = tmp_path / "benchmarks" / "results"
+    res.mkdir(parents=True)
+    (res / "x.json").write_text(json.dumps({"sources": {}, "sources_kind": "code"}))
+    (res / "y.json").write_text(json.dumps(
+        {"sources": {"factors/encoder.py": "0" * 16}, "sources_kind": "code"}))
+    (res / "z.json").write_text(json.dumps(
+        {"sources": {"factors/encoder.py": code_hash(root / "factors/encoder.py")}, "sources_kind": "code"}))
+    monkeypatch.setattr(st, "RESULTS", res)
+    (tmp_path / "factors").symlink_to(root / "factors")
+    assert st.stale() == {"x.json": ["no record of the code it ran"], "y.json": ["factors/encoder.py"]}

@@ -245,10 +245,18 @@ def figure_specs(estimates: list[Estimate], gps_estimates: list[Estimate], log: 
     return out
 
 
+#: The plotly.js bundle the pages inline: the "cartesian" partial bundle
+#: (scatter and heatmap are all the figures use), vendored in assets/ with
+#: its MIT licence. It is 1.4 MB where the full bundle is 4.8 MB, and the
+#: browser's parsing of the bundle is most of a report's load time
+#: (benchmarks/report_size.py times the one-hour report with each).
+PLOTLY_BUNDLE = "plotly-cartesian.min.js"
+
+
 def plotly_js() -> str:
-    """The plotly.js bundle shipped with the plotly package (inlined into the page)."""
-    from plotly.offline import get_plotlyjs
-    return get_plotlyjs()
+    """The vendored plotly.js bundle's source, inlined into the page."""
+    from importlib.resources import files
+    return files("odomgraph.analysis").joinpath("assets", PLOTLY_BUNDLE).read_text(encoding="utf-8")
 
 
 def figure_script(fid: str, fig: dict) -> str:
