@@ -106,6 +106,42 @@ def test_our_own_output_is_replaced_but_not_a_file_the_user_added(tmp_path, shor
     assert (out / "my-plot.png").read_bytes() == b"user data"
 
 
+@pytest.mark.parametrize("command", ["estimate", "compare", "simulate", "import"])
+def test_a_log_odomgraph_wrote_is_never_replaced(tmp_path, short_log, command):
+    # The probe: import a bag to imp/, then "compare OTHER -o imp" replaced the
+    # recording with a report (the marker listed every file, so it looked ours).
+    victim = tmp_path / "imp"
+    assert run("import", "rosbag", DATA / "bags" / "jackal-test2.bag", "-o", victim,
+               "--track-width", "0.43").exit_code == 0
+    assert json.loads((victim / MARKER).read_text())["kind"] == "log"
+    before = snapshot(victim)
+    args = {"estimate": ("estimate", short_log, "-o", victim),
+            "compare": ("compare", short_log, "-o", victim),
+            "simulate": ("simulate", "-o", victim, "--duration", "10"),
+            "import": ("import", "rosbag", DATA / "bags" / "jackal-test2.bag", "-o", victim,
+                       "--track-width", "0.5")}[command]
+    one_line_error(run(*args), "holds a log", "never replaced")
+    assert snapshot(victim) == before
+
+
+def test_a_file_edited_since_odomgraph_wrote_it_is_the_users(tmp_path, short_log):
+    out = tmp_path / "est"
+    assert run("estimate", short_log, "-o", out).exit_code == 0
+    marker = json.loads((out / MARKER).read_text())
+    assert marker["sha256"]["states.csv"] == hashlib.sha256((out / "states.csv").read_bytes()).hexdigest()
+    with open(out / "summary.json", "a") as f:
+        f.write("\n")                          # one byte added by hand
+    before = snapshot(out)
+    one_line_error(run("estimate", short_log, "--method", "batch", "-o", out), "summary.json (changed since")
+    assert snapshot(out) == before
+    # A marker from before the hashes (names only) still lets our own output be replaced.
+    (out / "summary.json").write_bytes((out / "summary.json").read_bytes()[:-1])
+    del marker["sha256"]
+    (out / MARKER).write_text(json.dumps(marker))
+    assert run("estimate", short_log, "--method", "batch", "-o", out).exit_code == 0
+    assert json.loads((out / "summary.json").read_text())["method"] == "batch"
+
+
 def test_calibrate_never_overwrites_the_logs_robot_toml_or_a_users_file(tmp_path, short_log):
     log = tmp_path / "log"
     shutil.copytree(short_log, log)
@@ -210,13 +246,22 @@ def _scale_times(log_dir: Path, factor: float, offset: float = 0.0, files=None):
 
 
 @pytest.mark.parametrize("factor,offset,unit", [(1e3, 0.0, "milliseconds"), (1e9, 1.7e18, "nanoseconds"),
-                                                (1e3, 1.7e12, "milliseconds")])
+                                                (1e3, 1.7e12, "milliseconds"), (1e6, 0.0, "microseconds"),
+                                                (1e6, 4e7, "microseconds")])
 def test_time_stamps_in_another_unit_are_refused_with_the_unit_named(tmp_path, short_log, factor, offset, unit):
+    # The probe: a 90 s log in microseconds spans 9e7, which was called
+    # milliseconds (25 h); the 0.05 s sample interval says microseconds.
     log = tmp_path / "log"
     shutil.copytree(short_log, log)
     _scale_times(log, factor, offset)
     one_line_error(run("estimate", log, "-o", tmp_path / "out"), unit)
     assert not (tmp_path / "out").exists()
+
+
+def test_a_long_span_is_named_by_its_sample_interval():
+    from odomgraph.io.log import MAX_DURATION, _unit_guess
+    assert _unit_guess(8.995e7, 1.0, MAX_DURATION, 5.0e4) == "; it looks like microseconds"   # 90 s at 20 Hz
+    assert _unit_guess(8.995e7, 1.0, MAX_DURATION, 50.0) == "; it looks like milliseconds"    # 25 h at 20 Hz
 
 
 def test_one_absurd_stamp_is_refused(tmp_path, short_log):

@@ -30,6 +30,55 @@ FIX_CORRELATION = 0.5
 MAX_LAG = 4.0
 
 
+#: A wheel reading exactly 0 for this long [s] while the other moves at
+#: least DEAD_OTHER_SPEED [m/s] is judged: a pivot about it, or a dead encoder.
+DEAD_MIN_SPAN = 3.0
+DEAD_OTHER_SPEED = 0.1
+
+
+def dead_encoder_warnings(log) -> list[str]:
+    """One line per wheel whose encoder reads exactly 0 for DEAD_MIN_SPAN
+    seconds or more while the other wheel moves, and the gyro does not turn
+    as a pivot about the still wheel would (|omega| = v_other / track).
+    The estimate reads such a stretch as slip (a skid at the other wheel's
+    speed), which is the right number for a wheel that really skids; for a
+    disconnected encoder the calibration is built around a fault, so it is
+    said. Without a gyro a pivot cannot be told from a dead encoder: both
+    are named."""
+    from odomgraph.estimators.measurements import from_log
+    w = from_log(log).wheel
+    if len(w.t) < 4:
+        return []
+    tw = w.t if w.dt is None else w.t - 0.5 * w.dt
+    gyro = (log.gyro.t, log.gyro.omega) if log.gyro is not None and len(log.gyro.t) >= 2 else None
+    out = []
+    for side, name in ((0, "left"), (1, "right")):
+        zero = w.m[:, side] == 0.0
+        other = np.abs(w.m[:, 1 - side])
+        # runs of exact zeros
+        edges = np.flatnonzero(np.diff(np.concatenate([[0], zero.astype(int), [0]])))
+        spans = []
+        for a, b in zip(edges[::2], edges[1::2]):
+            t0, t1 = tw[a], tw[b - 1]
+            if t1 - t0 < DEAD_MIN_SPAN or np.median(other[a:b]) < DEAD_OTHER_SPEED:
+                continue
+            if gyro is not None:
+                sel = (gyro[0] >= t0) & (gyro[0] <= t1)
+                if sel.sum() >= 3:
+                    pivot = np.median(other[a:b]) / log.robot.track_width
+                    if np.median(np.abs(gyro[1][sel])) > 0.5 * pivot:
+                        continue                   # the gyro turns as a pivot would: a real pivot
+            spans.append((t0, t1))
+        if spans:
+            total = sum(b - a for a, b in spans)
+            where = ", ".join(f"{a:.0f}-{b:.0f} s" for a, b in spans[:3]) + (", ..." if len(spans) > 3 else "")
+            why = ("the gyro sees no turn, so the encoder looks dead or disconnected" if gyro is not None else
+                   "a pivot about that wheel, or a dead encoder (no gyro to tell)")
+            out.append(f"the {name} encoder reads 0 for {total:.0f} s ({where}) while the other wheel moves: {why}; "
+                       "those stretches are estimated as slip")
+    return out
+
+
 def mounting_warnings(log) -> list[str]:
     """One line per mounting or wiring mistake that the log shows."""
     from odomgraph.analysis.holdout import wheel_yaw_rate_at_gyro
@@ -91,20 +140,33 @@ def mounting_warnings(log) -> list[str]:
     return out
 
 
+#: A grid step is compared only when the fixes around both its ends are at
+#: most this many steps apart: across a dropout the fixes' straight line is
+#: no path (a 60 s outage read as "one encoder counts backwards").
+MAX_FIX_GAP = 2.0
+
+
 def _fix_grid(log, step: float):
-    """(grid times, fix x, fix y on the grid, wheel path (t, pose)) or None."""
+    """(grid times, fix x, fix y on the grid, wheel path (t, pose), fix sigma,
+    (grid-1,) mask of the steps the fixes cover) or None."""
     from odomgraph.estimators.measurements import clean, dead_reckoning, from_log
     if log.gps is None or len(log.gps.t) < 20:
         return None
     log = clean(log)[0]
     g = log.gps
+    if len(g.t) < 20:
+        return None
     t_dr, dr = dead_reckoning(from_log(log), log.robot.track_width)
     lo, hi = max(g.t[0], t_dr[0]), min(g.t[-1], t_dr[-1])
     if hi - lo < 10 * step or np.median(np.diff(g.t)) > step:
         return None
     grid = np.arange(lo, hi, step)
     sig = float(np.median(g.sigma)) if g.sigma is not None else log.robot.gps_sigma
-    return grid, np.interp(grid, g.t, g.x), np.interp(grid, g.t, g.y), t_dr, dr, sig
+    # the span of the two fixes around each grid time
+    j = np.clip(np.searchsorted(g.t, grid), 1, len(g.t) - 1)
+    ok = (g.t[j] - g.t[j - 1]) <= MAX_FIX_GAP * step
+    covered = ok[:-1] & ok[1:]
+    return grid, np.interp(grid, g.t, g.x), np.interp(grid, g.t, g.y), t_dr, dr, sig, covered
 
 
 def fix_speed_correlation(log, step: float = 2.0, max_lag: float | None = None):
@@ -115,13 +177,13 @@ def fix_speed_correlation(log, step: float = 2.0, max_lag: float | None = None):
     grid_data = _fix_grid(log, step)
     if grid_data is None:
         return None
-    grid, x, y, t_dr, dr, sig = grid_data
-    fix_speed = np.hypot(np.diff(x), np.diff(y)) / step
+    grid, x, y, t_dr, dr, sig, covered = grid_data
+    fix_speed = (np.hypot(np.diff(x), np.diff(y)) / step)[covered]
     max_lag = MAX_LAG if max_lag is None else max_lag
 
     def wheel_speed(lag):
         px, py = np.interp(grid - lag, t_dr, dr[:, 0]), np.interp(grid - lag, t_dr, dr[:, 1])
-        return np.hypot(np.diff(px), np.diff(py)) / step
+        return (np.hypot(np.diff(px), np.diff(py)) / step)[covered]
     w0 = wheel_speed(0.0)
     if fix_speed.size < 10 or np.std(fix_speed) < 4.0 * sig / step or np.std(w0) == 0:
         return None
@@ -146,9 +208,9 @@ def fix_turn_correlation(log, step: float | None = None) -> float | None:
     grid_data = _fix_grid(log, step)
     if grid_data is None:
         return None
-    grid, x, y, t_dr, dr, sig = grid_data
+    grid, x, y, t_dr, dr, sig, covered = grid_data
     dx, dy = np.diff(x), np.diff(y)
-    moving = np.hypot(dx, dy) > max(6.0 * sig, 0.05)
+    moving = (np.hypot(dx, dy) > max(6.0 * sig, 0.05)) & covered
     course = np.arctan2(dy, dx)
     ok = moving[:-1] & moving[1:]
     d_course = np.angle(np.exp(1j * np.diff(course)))[ok]

@@ -584,7 +584,8 @@ def run_batch(log: Log, schedule: Schedule = Schedule(), options: SmootherOption
         est.warnings.append(f"batch: stopped at its iteration cap ({options.max_iterations} Gauss-Newton "
                             "iterations) before converging; the estimate may not be the optimum")
     est.rejected, est.downweighted = robust_counts(prob, pose, W)
-    est.rejected.update(prob.spikes)
+    for k, v in (prob.spikes or {}).items():          # added to what the robust loss rejected
+        est.rejected[k] = est.rejected.get(k, 0) + v
     est.used = measurement_counts(prob)
     return est
 

@@ -32,25 +32,16 @@ from odomgraph import state as S
 from odomgraph.checks import bounded, check_fields
 from odomgraph.errors import EstimatorDivergedError
 from odomgraph.estimators.initial import InitialState, initial_state
-from odomgraph.estimators.measurements import Measurements, from_log, slip_intensity
+from odomgraph.estimators.measurements import from_log, slip_intensity
 from odomgraph.observability import decondition
 from odomgraph.estimators.slipcheck import in_stretches, in_window
 from odomgraph.result import Estimate, Innovations
 from odomgraph.estimators.schedule import Hold, Schedule
 from odomgraph.io.log import Log
 
-# Sensor codes in the event stream; at equal times lower codes go first.
-WHEEL, GYRO, GPS, RANGE, VEL = range(5)
-SENSOR_NAMES = ("encoders", "gyro", "gps", "ranges", "velocity")
-_DOF = (2, 1, 2, 1, 2)  # measurement dimension of each sensor
+from odomgraph.estimators.sensors import (DOF, ENC_IDX, GATED, GPS, GYRO, GYRO_IDX, POSE_IDX, RANGE, SCALE_IDX,
+                                         SENSOR_NAMES, SLIP_IDX, VEL, VEL_IDX, WHEEL, event_stream)
 
-_ENC_IDX = np.array([S.V, S.OMEGA, S.SLIP_L, S.SLIP_R, S.SCALE_L, S.SCALE_R, S.SCALE_B])
-# Contiguous blocks as slices: views instead of fancy-indexing copies in the hot loop.
-_GYRO_IDX = slice(S.OMEGA, S.BIAS + 1)
-_POSE_IDX = slice(S.X, S.THETA + 1)
-_VEL_IDX = slice(S.V, S.OMEGA + 1)
-_SLIP_IDX = slice(S.SLIP_L, S.SLIP_R + 1)
-_SCALE_IDX = slice(S.SCALE_L, S.SCALE_B + 1)
 _I = np.eye(S.N)
 
 
@@ -90,23 +81,6 @@ class EKFOptions:
         check_fields(self)
 
 
-def event_stream(meas: Measurements, t0: float):
-    """(times, sensor codes, row indices) of every measurement at or after t0, time-ordered."""
-    ts, codes, rows = [], [], []
-    for code, src in ((WHEEL, meas.wheel.t), (GYRO, meas.gyro), (GPS, meas.gps), (RANGE, meas.ranges),
-                      (VEL, meas.velocity)):
-        if src is None:
-            continue
-        t = src if code == WHEEL else src[0]
-        sel = np.nonzero(t >= t0)[0]
-        ts.append(t[sel]); codes.append(np.full(sel.size, code)); rows.append(sel)
-    t = np.concatenate(ts); c = np.concatenate(codes); r = np.concatenate(rows)
-    order = np.lexsort((c, t))
-    return t[order], c[order], r[order]
-
-
-#: Sensors behind the gate; the others are never rejected.
-GATED = (GPS, RANGE, VEL)
 
 
 def gate_thresholds(options: EKFOptions) -> dict[int, float | None]:
@@ -119,7 +93,7 @@ def gate_thresholds(options: EKFOptions) -> dict[int, float | None]:
             out[code] = options.gate
         elif options.gate_probability >= 1.0:
             out[code] = None
-        elif _DOF[code] == 1:
+        elif DOF[code] == 1:
             out[code] = NormalDist().inv_cdf(0.5 * (1.0 + options.gate_probability)) ** 2
         else:                                  # chi-square with 2 dof: -2 ln(1 - p)
             out[code] = -2.0 * float(np.log1p(-options.gate_probability))
@@ -136,7 +110,7 @@ def watch_widening(code: int, y: np.ndarray) -> tuple[slice, np.ndarray] | None:
     slip states cannot reach fast enough (a stall, nominal parameters far
     off), a gyro whose bias jumped. y: the latest innovation."""
     if code == WHEEL:
-        return _SLIP_IDX, y**2
+        return SLIP_IDX, y**2
     if code == GYRO:
         return slice(S.BIAS, S.BIAS + 1), y**2
     return None
@@ -173,9 +147,9 @@ def reacquire_widening(code: int, Y: np.ndarray) -> tuple[slice, np.ndarray]:
     update, its correlations included."""
     s2 = np.mean(Y**2, 0)
     if code == VEL:
-        return _VEL_IDX, s2
+        return VEL_IDX, s2
     per_axis = float(np.mean(s2))              # GPS: both axes; a range: its one value
-    return _POSE_IDX, np.array([per_axis, per_axis, 0.0])
+    return POSE_IDX, np.array([per_axis, per_axis, 0.0])
 
 
 def add_process_noise(P: np.ndarray, J: np.ndarray, dt: float, q: dict, q_slip: np.ndarray) -> None:
@@ -231,9 +205,9 @@ class EKF:
         self._q_slip = slip_intensity(pn, self.meas)
         if not options.slip_states:
             self._q_slip = np.zeros((2, 2))
-            self.x[_SLIP_IDX] = 0.0
-            self.P[_SLIP_IDX, :] = 0.0
-            self.P[:, _SLIP_IDX] = 0.0
+            self.x[SLIP_IDX] = 0.0
+            self.P[SLIP_IDX, :] = 0.0
+            self.P[:, SLIP_IDX] = 0.0
         self._R_slip = np.eye(2) * pn.pseudo_slip_sigma**2
         self._R_scale = np.eye(3) * pn.pseudo_scale_sigma**2
         self.holding_scale = False
@@ -278,7 +252,7 @@ class EKF:
                 return -nis
         K = PHt @ Sinv
         if self.holding_scale:
-            K[_SCALE_IDX, :] = 0.0
+            K[SCALE_IDX, :] = 0.0
         self.x += K @ y
         self.x[2] = wrap_angle(self.x[2])
         # Joseph form P = (I-KH) P (I-KH)' + K R K'. It keeps P symmetric
@@ -321,9 +295,9 @@ class EKF:
         gates = gate_thresholds(opt)
         row = 0
         n_up = 0
-        nis_ema = [float(d) for d in _DOF]
-        nis_clip = [10.0 * opt.max_mean_nis * d for d in _DOF]
-        n_seen = [0] * len(_DOF)
+        nis_ema = [float(d) for d in DOF]
+        nis_clip = [10.0 * opt.max_mean_nis * d for d in DOF]
+        n_seen = [0] * len(DOF)
         run = {c: [] for c in GATED}         # innovations of the current run of rejections
         hist: dict[tuple, list] = {}          # (sensor, beacon) -> its last GATE_HISTORY innovations
         recoveries: list[str] = []
@@ -338,20 +312,20 @@ class EKF:
             self.predict(t)
             if switch_sigma is None and t_switch is not None and t >= t_switch:
                 # The schedule switches: from here on every update holds the scale factors.
-                switch_sigma = self.P[_SCALE_IDX, _SCALE_IDX].copy()
+                switch_sigma = self.P[SCALE_IDX, SCALE_IDX].copy()
                 self.holding_scale = sch.hold is Hold.consider
             x = self.x
             if code == WHEEL:
                 if (switch_sigma is None and t_switch is not None and not slip_ev[k]) or not obs.slip_observable:
                     h, H = pseudo.zero_slip(x[6], x[7])                              # eq. 35-36
-                    self.update(np.zeros(2), h, H, _SLIP_IDX, self._R_slip)
+                    self.update(np.zeros(2), h, H, SLIP_IDX, self._R_slip)
                 elif switch_sigma is not None and sch.hold is Hold.pseudo:
                     h, H = pseudo.hold_scale(x[8], x[9], x[10])                      # eq. 37-38
-                    self.update(h.copy(), h, H, _SCALE_IDX, self._R_scale)
+                    self.update(h.copy(), h, H, SCALE_IDX, self._R_scale)
                 x = self.x  # the pseudo-update has moved the state
                 h, H = encoder.wheel_speeds(x[3], x[4], x[6], x[7], x[8], x[9], x[10], track)  # eq. 29-34
                 s = m.wheel.sigma[i]
-                nis[WHEEL].append((t, self.update(m.wheel.m[i], h, H, _ENC_IDX, np.diag(s * s))))
+                nis[WHEEL].append((t, self.update(m.wheel.m[i], h, H, ENC_IDX, np.diag(s * s))))
                 self._check()
                 out_t[row] = t
                 out_x[row] = self.x
@@ -363,22 +337,22 @@ class EKF:
                 row += 1
             elif code == GYRO:
                 h, H = gyro.yaw_rate(x[4], x[5])                                      # eq. 10-11
-                nis[GYRO].append((t, self.update(m.gyro[1][i:i + 1], h, H, _GYRO_IDX, R_gyro)))
+                nis[GYRO].append((t, self.update(m.gyro[1][i:i + 1], h, H, GYRO_IDX, R_gyro)))
             elif code == GPS:
                 h, H = gps.antenna_position(x[0], x[1], x[2], lever_gps)              # eq. 8-9
                 sg = m.gps[2][i]
                 key = (GPS, 0)
-                nis[GPS].append((t, self.update(m.gps[1][i], h, H, _POSE_IDX, np.eye(2) * sg * sg,
+                nis[GPS].append((t, self.update(m.gps[1][i], h, H, POSE_IDX, np.eye(2) * sg * sg,
                                                 gates[GPS], gate_reference(hist.setdefault(key, [])))))
             elif code == RANGE:
                 h, H = ranging.beacon_range(x[0], x[1], x[2], m.ranges[1][i], lever_rng)   # eq. 12-16
                 key = (RANGE, m.ranges_id[i])
-                nis[RANGE].append((t, self.update(m.ranges[2][i:i + 1], h, H[:, :3], _POSE_IDX, R_rng,
+                nis[RANGE].append((t, self.update(m.ranges[2][i:i + 1], h, H[:, :3], POSE_IDX, R_rng,
                                                   gates[RANGE], gate_reference(hist.setdefault(key, [])))))
             else:
                 h, H = velocity.body_velocity(x[3], x[4])                             # sec. VI-B
                 key = (VEL, 0)
-                nis[VEL].append((t, self.update(m.velocity[1][i], h, H, _VEL_IDX, R_vel, gates[VEL],
+                nis[VEL].append((t, self.update(m.velocity[1][i], h, H, VEL_IDX, R_vel, gates[VEL],
                                                 gate_reference(hist.setdefault(key, [])))))
             nis_k = nis[code][-1][1]
             if code in run:
@@ -403,8 +377,8 @@ class EKF:
             # gross outlier is clipped so it cannot trip it; a sustained mismatch does.
             ema = nis_ema[code] = 0.98 * nis_ema[code] + 0.02 * min(nis_k, nis_clip[code])
             n_seen[code] += 1
-            if n_seen[code] > 100 and ema > opt.max_mean_nis * _DOF[code]:
-                what = (f"the running mean NIS of {SENSOR_NAMES[code]} is {ema:.0f} (expected {_DOF[code]})")
+            if n_seen[code] > 100 and ema > opt.max_mean_nis * DOF[code]:
+                what = (f"the running mean NIS of {SENSOR_NAMES[code]} is {ema:.0f} (expected {DOF[code]})")
                 widen = watch_widening(code, np.atleast_1d(self.last_y))
                 if widen is None or len(recoveries) >= MAX_RECOVERIES:
                     raise EstimatorDivergedError(f"EKF diverged at t={t:.3f} s: {what}; the model no longer "
@@ -413,7 +387,7 @@ class EKF:
                 # this sensor's mismatch (a stall's slip, a bias jump) and go on.
                 blk, add = widen
                 self.P[blk, blk] += np.diag(add)
-                nis_ema[code], n_seen[code] = float(_DOF[code]), 0
+                nis_ema[code], n_seen[code] = float(DOF[code]), 0
                 recoveries.append(f"t={t:.2f} s: {what}; its states' covariance widened")
             n_up += 1
             if progress is not None and k % stride == 0:
@@ -427,7 +401,7 @@ class EKF:
 
         est = make_estimate("ekf" if opt.slip_states else "ekf-no-slip", out_t[:row], out_x[:row], out_var[:row],
                             out_pose[:row], nis, list(m.notes) + [self.init.note], time.perf_counter() - wall0,
-                            n_up, t_switch, switch_sigma, sch.hold, self.P[_SCALE_IDX, _SCALE_IDX].copy(),
+                            n_up, t_switch, switch_sigma, sch.hold, self.P[SCALE_IDX, SCALE_IDX].copy(),
                             self.init)
         est.recoveries = recoveries
         est.warnings += window_warn
@@ -452,7 +426,7 @@ def make_estimate(method: str, t, mean, var, pose_cov, nis: dict, notes: list, w
             acc = arr[:, 1] >= 0
             if (~acc).any():
                 rejected[SENSOR_NAMES[code]] = int((~acc).sum())
-            innov[SENSOR_NAMES[code]] = Innovations(arr[acc, 0], arr[acc, 1], _DOF[code])
+            innov[SENSOR_NAMES[code]] = Innovations(arr[acc, 0], arr[acc, 1], DOF[code])
     given = final_cov
     if hold is Hold.pseudo and switch_cov is not None:
         given = switch_cov  # the pseudo-update's sigma is not an uncertainty

@@ -22,11 +22,10 @@ from odomgraph.factors._math import wrap_angle
 from odomgraph.factors.motion import propagate
 from odomgraph import state as S
 from odomgraph.errors import EstimatorDivergedError
-from odomgraph.estimators.ekf import (_DOF, _ENC_IDX, _GYRO_IDX, _POSE_IDX, _SCALE_IDX, _SLIP_IDX, _VEL_IDX, GATE_HISTORY,
-                                      GATED,
-                                      GPS, GYRO, RANGE, SENSOR_NAMES, VEL, WHEEL, EKFOptions, event_stream,
-                                      MAX_RECOVERIES, gate_thresholds, make_estimate, reacquire_widening,
-                                      watch_widening)
+from odomgraph.estimators.ekf import (GATE_HISTORY, MAX_RECOVERIES, EKFOptions, gate_thresholds, make_estimate,
+                                      reacquire_widening, watch_widening)
+from odomgraph.estimators.sensors import (DOF, ENC_IDX, GATED, GPS, GYRO, GYRO_IDX, POSE_IDX, RANGE, SCALE_IDX,
+                                         SENSOR_NAMES, SLIP_IDX, VEL, VEL_IDX, WHEEL, event_stream)
 from odomgraph.estimators.initial import initial_state
 from odomgraph.estimators.measurements import from_log, slip_intensity
 from odomgraph.observability import decondition
@@ -110,9 +109,9 @@ def run_ekf_many(logs: list[Log], schedule: Schedule = Schedule(), options: EKFO
     q_slip = slip_intensity(pn, m0)
     if not opt.slip_states:
         q_slip = np.zeros((2, 2))
-        x[:, _SLIP_IDX] = 0.0
-        P[:, _SLIP_IDX, :] = 0.0
-        P[:, :, _SLIP_IDX] = 0.0
+        x[:, SLIP_IDX] = 0.0
+        P[:, SLIP_IDX, :] = 0.0
+        P[:, :, SLIP_IDX] = 0.0
     R_slip = np.eye(2) * pn.pseudo_slip_sigma**2
     R_scale = np.eye(3) * pn.pseudo_scale_sigma**2
     R_gyro = np.array([[r.gyro_sigma**2]])
@@ -131,8 +130,8 @@ def run_ekf_many(logs: list[Log], schedule: Schedule = Schedule(), options: EKFO
     out_t = np.empty(rows)
     nis_t = {k: [] for k in range(5)}
     nis_v = {k: [] for k in range(5)}
-    nis_ema = np.tile(np.asarray(_DOF, float), (n, 1))
-    nis_clip = np.array([10.0 * opt.max_mean_nis * d for d in _DOF])
+    nis_ema = np.tile(np.asarray(DOF, float), (n, 1))
+    nis_clip = np.array([10.0 * opt.max_mean_nis * d for d in DOF])
     seen_run = np.zeros((n, 5), int)
     failed: list[EstimatorDivergedError | None] = [None] * n
     dead = np.zeros(n, bool)
@@ -171,7 +170,7 @@ def run_ekf_many(logs: list[Log], schedule: Schedule = Schedule(), options: EKFO
             K[rej] = 0.0
             nis = np.where(rej, -nis, nis)
         if holding:
-            K[:, _SCALE_IDX, :] = 0.0
+            K[:, SCALE_IDX, :] = 0.0
         x = x + np.einsum("nij,nj->ni", K, y)
         x[:, 2] = wrap_angle(x[:, 2])
         IKH = np.broadcast_to(_I, P.shape).copy()
@@ -198,21 +197,21 @@ def run_ekf_many(logs: list[Log], schedule: Schedule = Schedule(), options: EKFO
                 x[:, 0], x[:, 1], x[:, 2] = pose[:, 0], pose[:, 1], wrap_angle(pose[:, 2])
                 t_now = t
             if switch_sigma is None and t_switch is not None and t >= t_switch:
-                switch_sigma = P[:, _SCALE_IDX, _SCALE_IDX].copy()
+                switch_sigma = P[:, SCALE_IDX, SCALE_IDX].copy()
                 holding = sch.hold is Hold.consider
             if code == WHEEL:
                 if (switch_sigma is None and t_switch is not None and not slip_ev[k]) or not obs.slip_observable:
                     h, H = pseudo.zero_slip(x[:, 6], x[:, 7])                        # eq. 35-36
-                    update(np.zeros((n, 2)), h, H, _SLIP_IDX, R_slip)
+                    update(np.zeros((n, 2)), h, H, SLIP_IDX, R_slip)
                 elif switch_sigma is not None and sch.hold is Hold.pseudo:
                     h, H = pseudo.hold_scale(x[:, 8], x[:, 9], x[:, 10])             # eq. 37-38
-                    update(h.copy(), h, H, _SCALE_IDX, R_scale)
+                    update(h.copy(), h, H, SCALE_IDX, R_scale)
                 h, H = encoder.wheel_speeds(x[:, 3], x[:, 4], x[:, 6], x[:, 7], x[:, 8], x[:, 9], x[:, 10],
                                             track)                                    # eq. 29-34
                 s2 = wheel_s2[:, i]
                 Rw = np.zeros((n, 2, 2))
                 Rw[:, 0, 0], Rw[:, 1, 1] = s2[:, 0], s2[:, 1]
-                nis = update(wheel_m[:, i], h, H, _ENC_IDX, Rw)
+                nis = update(wheel_m[:, i], h, H, ENC_IDX, Rw)
                 d = np.diagonal(P, 0, 1, 2)
                 bad = ~(np.isfinite(x).all(1) & np.isfinite(d).all(1)) | (d < -1e-12).any(1)
                 far = (np.abs(x[:, S.SCALE] - 1.0).max(1) > opt.max_scale_error) | (x[:, S.SCALE].min(1) < 0.05)
@@ -229,20 +228,20 @@ def run_ekf_many(logs: list[Log], schedule: Schedule = Schedule(), options: EKFO
                 row += 1
             elif code == GYRO:
                 h, H = gyro.yaw_rate(x[:, 4], x[:, 5])                               # eq. 10-11
-                nis = update(gyro_z[:, i], h, H, _GYRO_IDX, R_gyro)
+                nis = update(gyro_z[:, i], h, H, GYRO_IDX, R_gyro)
             elif code == GPS:
                 h, H = gps.antenna_position(x[:, 0], x[:, 1], x[:, 2], lever_gps)    # eq. 8-9
                 Rg = np.eye(2) * gps_s2[:, i, None, None]
                 key = (GPS, 0)
-                nis = update(gps_z[:, i], h, H, _POSE_IDX, Rg, gates[GPS], reference(key))
+                nis = update(gps_z[:, i], h, H, POSE_IDX, Rg, gates[GPS], reference(key))
             elif code == RANGE:
                 h, H = ranging.beacon_range(x[:, 0], x[:, 1], x[:, 2], rng_b[i], lever_rng)  # eq. 12-16
                 key = (RANGE, int(m0.ranges_id[i]))
-                nis = update(rng_z[:, i], h, H[:, :, :3], _POSE_IDX, R_rng, gates[RANGE], reference(key))
+                nis = update(rng_z[:, i], h, H[:, :, :3], POSE_IDX, R_rng, gates[RANGE], reference(key))
             else:
                 h, H = velocity.body_velocity(x[:, 3], x[:, 4])                      # sec. VI-B
                 key = (VEL, 0)
-                nis = update(vel_z[:, i], h, H, _VEL_IDX, R_vel, gates[VEL], reference(key))
+                nis = update(vel_z[:, i], h, H, VEL_IDX, R_vel, gates[VEL], reference(key))
             nis_t[code].append(t)
             nis_v[code].append(nis)
             rejected = nis < 0
@@ -267,16 +266,16 @@ def run_ekf_many(logs: list[Log], schedule: Schedule = Schedule(), options: EKFO
             nk = np.minimum(np.where(rejected, nis_ema[:, code], nis), nis_clip[code])
             nis_ema[:, code] = np.where(rejected, nis_ema[:, code], 0.98 * nis_ema[:, code] + 0.02 * nk)
             seen_run[:, code] += ~rejected
-            lost = (seen_run[:, code] > 100) & (nis_ema[:, code] > opt.max_mean_nis * _DOF[code])
+            lost = (seen_run[:, code] > 100) & (nis_ema[:, code] > opt.max_mean_nis * DOF[code])
             for j in np.nonzero(lost & ~dead)[0]:
-                what = f"the running mean NIS of {SENSOR_NAMES[code]} is {nis_ema[j, code]:.0f} (expected {_DOF[code]})"
+                what = f"the running mean NIS of {SENSOR_NAMES[code]} is {nis_ema[j, code]:.0f} (expected {DOF[code]})"
                 widen = watch_widening(code, np.atleast_1d(last_y[j]))
                 if widen is None or len(recoveries[j]) >= MAX_RECOVERIES:
                     kill(j, f"EKF diverged at t={t:.3f} s: {what}; the model no longer explains the data")
                     continue
                 blk, add = widen                                   # as EKF.run
                 P[j, blk, blk] += np.diag(add)
-                nis_ema[j, code], seen_run[j, code] = float(_DOF[code]), 0
+                nis_ema[j, code], seen_run[j, code] = float(DOF[code]), 0
                 recoveries[j].append(f"t={t:.2f} s: {what}; its states' covariance widened")
             if dead.any():
                 x[dead], P[dead] = frozen_x[dead], frozen_P[dead]
@@ -297,7 +296,7 @@ def run_ekf_many(logs: list[Log], schedule: Schedule = Schedule(), options: EKFO
         est = make_estimate("ekf" if opt.slip_states else "ekf-no-slip", out_t, out_x[:, j], out_var[:, j],
                             out_pose[:, j], nis_j, list(meas[j].notes) + [inits[j].note], wall, n_up,
                             t_switch, None if switch_sigma is None else switch_sigma[j], sch.hold,
-                            P[j, _SCALE_IDX, _SCALE_IDX].copy(), inits[j])
+                            P[j, SCALE_IDX, SCALE_IDX].copy(), inits[j])
         est.recoveries = recoveries[j]
         for key, v in meas[j].spikes.items():
             est.rejected[key] = est.rejected.get(key, 0) + v

@@ -288,7 +288,8 @@ class _Runner:
         est.update_times = self.update_times[1:]
         est.recoveries = list(self.recoveries)
         est.rejected, est.downweighted = robust_counts(self.prob, self.pose, self.W)
-        est.rejected.update(self.prob.spikes or {})
+        for k, v in (self.prob.spikes or {}).items():     # added to what the robust loss rejected
+            est.rejected[k] = est.rejected.get(k, 0) + v
         est.used = measurement_counts(self.prob)
         if self.graph.gated:
             est.notes.append("gated at first linearisation (online): " + ", ".join(

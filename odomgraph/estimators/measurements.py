@@ -58,10 +58,10 @@ def from_log(log: Log) -> Measurements:
             raise LogFormatError((log.path / name) if log.path else name,
                                  "time does not increase (read the log with read_log, which drops rows written "
                                  "twice)")
+    notes = repeat_notes(log)
     log, spikes = clean(log)
     r = log.robot
     a, b = r.encoder_sigma
-    notes = []
     if log.encoders is not None:
         e = log.encoders
         dt = np.diff(e.t)
@@ -209,11 +209,46 @@ def despike(log: Log) -> tuple[Log, dict[str, int]]:
     return log, counts
 
 
+def repeated_fixes(gps) -> np.ndarray:
+    """(K,) mask of fixes that repeat the fix before them exactly (x, y and
+    sigma): a receiver driver re-publishing its last fix at its own rate
+    (1 Hz fixes sent at 10 Hz). Each copy carries a new stamp and an old
+    position; read as ten fixes it says the robot stood still nine tenths of
+    the time (a probe's log: scale factors 5-7 sigma off, status ok). A
+    fresh fix never equals the last one to the bit while the robot moves,
+    and at a standstill dropping the copies loses nothing new."""
+    same = (gps.x[1:] == gps.x[:-1]) & (gps.y[1:] == gps.y[:-1])
+    if gps.sigma is not None:
+        same &= gps.sigma[1:] == gps.sigma[:-1]
+    return np.concatenate([[False], same])
+
+
+def repeat_notes(log: Log) -> list[str]:
+    """One line when gps.csv repeats fixes (``repeated_fixes``), [] otherwise."""
+    if log.gps is None or len(log.gps.t) < 2:
+        return []
+    n = int(repeated_fixes(log.gps).sum())
+    if not n:
+        return []
+    return [f"gps: {n} of {len(log.gps.t)} fixes repeat the fix before them exactly (a receiver re-publishing "
+            "its last fix): each position was read once, at its first stamp"]
+
+
 def clean(log: Log) -> tuple[Log, dict[str, int]]:
-    """The log as every estimator reads it: GPS stamps moved back by the
-    configured ``[gps] time_offset`` (a fix stamped t was taken at t - offset),
-    then ``despike``. Returns it with the spikes taken out per sensor."""
+    """The log as every estimator reads it: GPS fixes that repeat the one
+    before dropped (``repeated_fixes``; the first copy is kept, its stamp
+    nearest the fix), GPS stamps moved back by the configured
+    ``[gps] time_offset`` (a fix stamped t was taken at t - offset), then
+    ``despike``. Returns it with the spikes taken out per sensor (the
+    repeated fixes are not rejections: ``repeat_notes`` says them)."""
     from dataclasses import replace
+    if log.gps is not None and len(log.gps.t) > 1:
+        rep = repeated_fixes(log.gps)
+        if rep.any():
+            g = log.gps
+            keep = ~rep
+            log = log.with_(gps=replace(g, t=g.t[keep], x=g.x[keep], y=g.y[keep],
+                                        sigma=None if g.sigma is None else g.sigma[keep]))
     off = log.robot.gps_time_offset
     if off and log.gps is not None:
         log = log.with_(gps=replace(log.gps, t=log.gps.t - off))

@@ -308,10 +308,14 @@ _FILES = {"encoders": "encoders.csv", "wheel_speeds": "wheel_speeds.csv", "gps":
           "ranges": "ranges.csv", "velocity": "velocity.csv", "truth": "truth.csv"}
 
 
-def _unit_guess(value: float, lo: float, hi: float) -> str:
-    """Which unit turns ``value`` into [lo, hi] seconds, in words ('' if none)."""
+def _unit_guess(value: float, lo: float, hi: float, interval: float | None = None) -> str:
+    """Which unit turns ``value`` into [lo, hi] seconds, and the file's median
+    sample ``interval`` (same unit) into a sensor's plausible 0.1 ms to
+    MAX_WHEEL_INTERVAL, in words ('' if none). The interval tells apart
+    units that both give a plausible length (90 s in microseconds read as
+    25 h in milliseconds)."""
     for unit, f in (("milliseconds", 1e3), ("microseconds", 1e6), ("nanoseconds", 1e9)):
-        if lo <= value / f <= hi:
+        if lo <= value / f <= hi and (interval is None or 1e-4 <= interval / f <= MAX_WHEEL_INTERVAL):
             return f"; it looks like {unit}"
     return ""
 
@@ -340,8 +344,9 @@ def check_clock(log: Log) -> None:
                                            "(LOG_FORMAT.md: t is in seconds)")
         spans[key] = (float(t[0]), float(t[-1]))
         if t[-1] - t[0] > MAX_DURATION:
+            step = float(np.median(np.diff(t))) if len(t) > 1 else None
             raise LogFormatError(d / name, f"spans {t[-1] - t[0]:.4g} s, more than a year: the time stamps are "
-                                           f"not seconds{_unit_guess(t[-1] - t[0], 1.0, MAX_DURATION)}")
+                                           f"not seconds{_unit_guess(t[-1] - t[0], 1.0, MAX_DURATION, step)}")
     wheel = "encoders" if log.encoders is not None else "wheel_speeds"
     wt = getattr(log, wheel).t
     if len(wt) > 1:

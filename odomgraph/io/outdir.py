@@ -7,10 +7,15 @@ destroy what odomgraph did not create.
   directory. Temporaries left by a killed run (its PID is gone) are removed
   by the next run that writes beside them.
 * Every output directory carries a marker file, ``.odomgraph``, listing the
-  files odomgraph wrote there. An existing directory is replaced only if it is
-  empty, or carries the marker and holds nothing but the files it lists. A
-  file name alone (``robot.toml``, ``summary.json``) proves nothing: a log
-  directory and a user's project both have one.
+  files odomgraph wrote there, each with its sha256. An existing directory is
+  replaced only if it is empty, or carries the marker and holds nothing but
+  the files it lists, each unchanged since it was written (a hand-edited
+  robot.toml is the user's). A file name alone (``robot.toml``,
+  ``summary.json``) proves nothing: a log directory and a user's project both
+  have one.
+* A log directory (marker kind "log": what ``import`` and ``simulate``
+  wrote) is data, and is never replaced: not by a report, an estimate, nor a
+  new log (``compare LOG2 -o LOG1`` deleted LOG1's recording).
 * An output is refused when it is an input, lies inside one or holds one
   (``estimate LOG -o LOG`` would delete the log), or is the current directory.
 * Directories and files get the permissions the umask gives, like any file a
@@ -92,10 +97,7 @@ def check_output(path: Path | str, inputs=(), directory: bool = True) -> Path:
     if directory:
         if not p.is_dir():
             raise OutputDirError(f"{p}: exists and is not a directory")
-        foreign = _foreign_entries(p)
-        if foreign:
-            raise OutputDirError(f"{p}: exists and holds files odomgraph did not write ({', '.join(foreign[:3])}"
-                                 f"{', ...' if len(foreign) > 3 else ''}); choose another output directory")
+        _refuse_to_replace(p)
     elif p.is_dir():
         raise OutputDirError(f"{p}: is a directory; give a file name")
     return p
@@ -111,19 +113,59 @@ def _entries(d: Path) -> list[str]:
     return sorted(out)
 
 
+def _sha256(f: Path) -> str:
+    import hashlib
+    h = hashlib.sha256()
+    with open(f, "rb") as fh:
+        for block in iter(lambda: fh.read(1 << 20), b""):
+            h.update(block)
+    return h.hexdigest()
+
+
+def _marker(d: Path) -> dict | None:
+    """The marker's contents, or None when there is none (or it is unreadable)."""
+    try:
+        m = json.loads((d / MARKER).read_text(encoding="utf-8"))
+        return m if isinstance(m, dict) and isinstance(m.get("files"), list) else None
+    except (OSError, ValueError):
+        return None
+
+
 def _foreign_entries(d: Path) -> list[str]:
-    """Entries of d that its marker does not list ([] when d may be replaced)."""
+    """Entries of d that its marker does not list, or whose contents changed
+    since it was written ([] when d may be replaced)."""
     try:
         present = _entries(d)
     except OSError as exc:
         raise OutputDirError(f"{d}: cannot be read ({_why(exc)})") from None
     if not present:
         return []
-    try:
-        listed = set(json.loads((d / MARKER).read_text(encoding="utf-8"))["files"])
-    except (OSError, ValueError, KeyError, TypeError):
+    m = _marker(d)
+    if m is None:
         return [e for e in present if "/" not in e] or present
-    return [e for e in present if e != MARKER and e not in listed]
+    listed = set(m["files"])
+    out = [e for e in present if e != MARKER and e not in listed]
+    # Markers before the hashes were recorded have none: their names are all there is to check.
+    for name, h in (m.get("sha256") or {}).items():
+        f = d / name
+        try:
+            if f.is_file() and _sha256(f) != h:
+                out.append(f"{name} (changed since odomgraph wrote it)")
+        except OSError as exc:
+            raise OutputDirError(f"{f}: cannot be read ({_why(exc)})") from None
+    return out
+
+
+def _refuse_to_replace(p: Path) -> None:
+    """OutputDirError unless the existing directory ``p`` may be replaced."""
+    foreign = _foreign_entries(p)
+    if foreign:
+        raise OutputDirError(f"{p}: exists and holds files odomgraph did not write ({', '.join(foreign[:3])}"
+                             f"{', ...' if len(foreign) > 3 else ''}); choose another output directory")
+    m = _marker(p)
+    if m is not None and m.get("kind") == "log":
+        raise OutputDirError(f"{p}: holds a log (written by odomgraph import or simulate), and a log is never "
+                             "replaced; choose another output directory, or delete it yourself first")
 
 
 _TEMP = re.compile(r"^\.(?P<name>.+)\.(tmp|old)-(?P<pid>\d+)-[^/]+$")
@@ -149,8 +191,9 @@ def clean_stale(parent: Path, name: str) -> None:
 def _write_marker(d: Path, kind: str) -> None:
     from odomgraph import __version__
     files = [e for e in _entries(d) if e != MARKER]
+    hashes = {e: _sha256(d / e) for e in files if (d / e).is_file()}
     (d / MARKER).write_text(json.dumps({"written_by": "odomgraph", "version": __version__, "kind": kind,
-                                        "files": files}, indent=1) + "\n", encoding="utf-8")
+                                        "files": files, "sha256": hashes}, indent=1) + "\n", encoding="utf-8")
 
 
 @contextlib.contextmanager
@@ -173,10 +216,10 @@ def atomic_output_dir(path: Path | str, inputs=(), kind: str = "output"):
         yield tmp
         _write_marker(tmp, kind)
         if path.exists():
-            foreign = _foreign_entries(path)      # it may have changed while we computed
-            if foreign:
-                raise OutputDirError(f"{path}: meanwhile gained files odomgraph did not write ({foreign[0]}); "
-                                     "nothing was replaced")
+            try:
+                _refuse_to_replace(path)          # it may have changed while we computed
+            except OutputDirError as exc:
+                raise OutputDirError(f"{exc} (it changed while this ran; nothing was replaced)") from None
             old = path.with_name(f".{path.name}.old-{os.getpid()}-{tmp.name[-8:]}")
             path.rename(old)
             tmp.rename(path)

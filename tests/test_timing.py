@@ -1,0 +1,152 @@
+"""The GPS time-offset check (analysis.timing): no offset claimed where the
+log cannot determine one, a wrong lever arm named as such, a real offset kept."""
+import re
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from odomgraph import state as S
+from odomgraph.analysis.timing import gps_offset, gps_offset_warnings, joint_fit
+from odomgraph.io.robot import RobotConfig
+from odomgraph.sim.faults import Faults, inject
+from odomgraph.sim.scenarios import Rates, Scenario, Segment, paper, yard
+from odomgraph.sim.simulate import simulate
+
+
+class _Est:
+    """What gps_offset_warnings reads of an estimate: the final scale factors."""
+
+    def __init__(self, scales):
+        self.mean = np.zeros((1, S.SCALE.stop if isinstance(S.SCALE, slice) else max(S.SCALE) + 1))
+        self.mean[0, S.SCALE] = scales
+
+
+def _said(line, what=r"look ([+-]\d+\.\d+) s late"):
+    m = re.search(what, line)
+    return float(m.group(1)) if m else None
+
+
+def _lines(log, scales):
+    return gps_offset_warnings(log, _Est(scales))
+
+
+def _late(log, dt):
+    return log.with_(gps=replace(log.gps, t=log.gps.t + dt))
+
+
+def _lever(log, lever):
+    return log.with_(robot=log.robot.with_(gps_lever_arm=lever))
+
+
+def _gentle() -> Scenario:
+    """The hostile probe's near-straight log: yaw rate +-0.02 rad/s at 1 m/s, 1 Hz fixes."""
+    robot = RobotConfig(ticks_per_meter_left=2000.0, ticks_per_meter_right=2000.0, track_width=0.6,
+                        encoder_sigma=(0.005, 0.01), gps_lever_arm=(-0.3, 0.0), gps_sigma=0.05, gyro_sigma=0.01)
+    return Scenario(name="gentle", robot=robot, scales=(1.02, 0.99, 1.06), prologue=(Segment(1, 0, 0),),
+                    loop=(Segment(20, 1.0, 0.02), Segment(20, 1.0, -0.02)), duration=90, slips=(),
+                    gyro_bias=0.01, gyro_bias_walk=1e-4, rates=Rates(encoders=20, gyro=20, gps=1))
+
+
+def _one_speed(hz: float) -> Scenario:
+    """Curves at one speed, moving from the first sample, antenna over the axle:
+    a time offset and a forward lever-arm error move the antenna alike."""
+    base = paper(90.0)
+    loop = (Segment(8, 1.0, 0.0), Segment(6, 1.0, 0.5), Segment(8, 1.0, 0.0), Segment(6, 1.0, -0.5))
+    return base.with_(slips=(), prologue=(Segment(4, 1.0, 0.0),), loop=loop, calibrate_until=None,
+                      robot=base.robot.with_(gps_lever_arm=(0.0, 0.0)),
+                      rates=Rates(encoders=20.0, gyro=25.0, gps=hz))
+
+
+# ------------------------------------------------------------ near-straight
+@pytest.mark.parametrize("seed", [3, 4, 5])
+def test_near_straight_driving_claims_no_offset(seed):
+    """Seed 3 was refused with "GPS time stamps look +1.63 s late (sigma
+    0.10 s)", and --time-offset wrote 1.104 s (truth 0): a window's minimum
+    sat where its shifted fixes met the first wheel movement, on a misfit
+    as flat as the noise from -1 to +1.4 s."""
+    sc = _gentle()
+    log = simulate(sc, seed)
+    for scales in (sc.scales, (1.02, 0.99, 1.047)):     # the truth, and seed 3's batch estimate
+        assert _lines(log, scales) == []
+        assert gps_offset(log, scales) is None
+    # a straight line with one speed tells nothing either
+    straight = sc.with_(loop=(Segment(60, 1.0, 0.0),), duration=60)
+    assert _lines(simulate(straight, seed), straight.scales) == []
+
+
+def test_near_straight_log_is_not_degraded_by_estimate():
+    from odomgraph.estimators.schedule import Schedule
+    from odomgraph.pipeline import Method, estimate
+    est = estimate(simulate(_gentle(), 3), Method.batch, Schedule(None))
+    assert not [w for w in est.warnings if "late" in w or "lever arm" in w], est.warnings
+
+
+# ------------------------------------------------------------ a real offset
+@pytest.mark.parametrize("which,seed,dt", [("paper", 7, 0.3), ("yard", 17, 0.3), ("yard", 5, 0.3),
+                                           ("yard", 5, 1.0), ("paper", 16, -0.5)])
+def test_a_real_offset_is_still_named_and_measured(which, seed, dt):
+    sc = paper(90.0) if which == "paper" else yard(90.0)
+    log = _late(inject(sc, Faults(), seed), dt)
+    lines = _lines(log, sc.scales)
+    assert len(lines) == 1 and lines[0].startswith("GPS time stamps look"), lines
+    assert abs(_said(lines[0]) - dt) < 0.03 and "lever arm" not in lines[0], lines
+    o = gps_offset(log, sc.scales)
+    assert o is not None and abs(o.delta - dt) < 0.03 and o.sigma < 0.05, o
+    # and nothing on the same log with the right clock
+    assert _lines(_late(log, -dt), sc.scales) == []
+
+
+# ------------------------------------------------------------ the lever arm
+@pytest.mark.parametrize("which,seed,lever,off", [("paper", 3, (0.0, 0.0), -0.45), ("paper", 8, (0.0, 0.0), -0.45),
+                                                  ("yard", 17, (0.55, 0.12), -0.30), ("yard", 5, (0.55, 0.12), -0.30)])
+def test_a_forward_lever_arm_error_is_named_not_a_time_offset(which, seed, lever, off):
+    """paper seed 3 with lever_arm (0, 0) (truth -0.45 m) warned "GPS time
+    stamps look +0.42 s late"; the yard's 0.3 m error was not seen at all."""
+    sc = paper(120.0) if which == "paper" else yard(90.0)
+    log = _lever(inject(sc, Faults(), seed), lever)
+    lines = _lines(log, sc.scales)
+    assert len(lines) == 1 and "lever arm looks off by about" in lines[0] and "x axis" in lines[0], lines
+    assert "time stamps look" not in lines[0]
+    j = joint_fit(log, sc.scales, 0.0, max_misfit=9.0)
+    assert abs(j.lever[0] - off) < 0.03 and abs(j.lever[1]) < 0.03 and abs(j.delta) < 0.03, j
+    o = gps_offset(log, sc.scales)                     # --time-offset does not set a lever arm's worth
+    assert o is not None and abs(o.delta) < 0.03
+
+
+@pytest.mark.parametrize("seed", [3, 8])
+def test_a_lateral_lever_arm_error_is_no_time_offset(seed):
+    """(-0.45, 0.3) against the true (-0.45, 0) warned "+0.25 s late"."""
+    sc = paper(120.0)
+    log = _lever(inject(sc, Faults(), seed), (-0.45, 0.3))
+    lines = _lines(log, sc.scales)
+    assert not [w for w in lines if "time stamps look" in w], lines
+    assert len(lines) == 1 and "y axis" in lines[0] and "x axis" not in lines[0], lines
+    j = joint_fit(log, sc.scales, 0.0, max_misfit=9.0)
+    assert abs(j.lever[1] + 0.3) < 0.03 and abs(j.delta) < 0.03, j
+
+
+def test_estimate_names_the_lever_arm_on_the_probe_log():
+    """The probe: simulate --duration 120 --seed 3, lever_arm = [0, 0]."""
+    from odomgraph.estimators.schedule import Schedule
+    from odomgraph.pipeline import Method, estimate
+    sc = paper(120.0)
+    est = estimate(_lever(inject(sc, Faults(), 3), (0.0, 0.0)), Method.batch, Schedule(20.0))
+    said = [w for w in est.warnings if "lever arm looks off" in w]
+    assert len(said) == 1 and "x axis" in said[0], est.warnings
+    assert abs(_said(said[0], r"off by about ([+-]\d+\.\d+) m") + 0.45) < 0.05, said
+    assert not [w for w in est.warnings if "time stamps look" in w]
+
+
+# ------------------------------------------------------------ cannot tell
+@pytest.mark.parametrize("hz,seed", [(20.0, 1), (2.0, 1), (2.0, 2)])
+def test_at_one_speed_both_candidates_are_named(hz, seed):
+    sc = _one_speed(hz)
+    log = simulate(sc, seed)
+    for bad in (_late(log, 0.3), _lever(log, (0.3, 0.0))):
+        lines = _lines(bad, sc.scales)
+        assert len(lines) == 1 and "cannot tell" in lines[0], lines
+        assert abs(_said(lines[0]) - 0.3) < 0.05, lines
+        assert abs(_said(lines[0], r"or the GPS lever arm is off by about ([+-]\d+\.\d+) m along the robot's x") + 0.3) < 0.05
+        assert gps_offset(bad, sc.scales) is None       # --time-offset: too little motion, none applied
+    assert _lines(log, sc.scales) == []
