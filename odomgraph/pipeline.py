@@ -195,9 +195,15 @@ def _with_time_offset(log: Log, method: Method, schedule: Schedule, progress, op
         raise NotEnoughDataError("--time-offset: the log has no GPS to measure a time offset of")
     total, sigma = log.robot.gps_time_offset, None
     scales = (1.0, 1.0, 1.0)
-    est = None
-    for _ in range(3):
+    est = first = None
+    for _ in range(4):
         o = gps_offset(log.with_(robot=log.robot.with_(gps_time_offset=total)), scales)
+        if o is None and est is None and first is None:
+            # Wheels a few percent off nominal bend the path enough that the
+            # offset cannot be told from them: measure with the estimated ones.
+            first = estimate(log, method, schedule, progress, **options)
+            scales = tuple(float(v) for v in first.mean[-1, S.SCALE])
+            continue
         if o is None:
             break
         total, sigma = total + o.delta, o.sigma
@@ -207,7 +213,7 @@ def _with_time_offset(log: Log, method: Method, schedule: Schedule, progress, op
                        **options)
         scales = tuple(float(v) for v in est.mean[-1, S.SCALE])
     if est is None:
-        est = estimate(log, method, schedule, progress, **options)
+        est = first if first is not None else estimate(log, method, schedule, progress, **options)
         est.warnings.append("--time-offset: too little motion to measure the GPS time offset; none applied")
         return est
     est.time_offsets = {"gps": {"value": float(total), "sigma": float(sigma)}}
@@ -488,7 +494,9 @@ def _calibration_checks(log: Log, est: Estimate, k, sk, method: Method, schedule
         # A GPS clock off against the wheels biases every scale factor (0.5 s
         # early gave 14-21 sigma): refuse rather than write it.
         from odomgraph.analysis.timing import gps_offset_warnings
-        problems += [f"{w} (calibrate --time-offset estimates it)" for w in gps_offset_warnings(log, est)]
+        # A lever-arm line names its own remedy; a clock line gets the option that estimates it.
+        problems += [w if "lever arm" in w and "time stamps" not in w else f"{w} (calibrate --time-offset estimates it)"
+                     for w in gps_offset_warnings(log, est)]
     unobs = est.unobservable()
     for name, v, s in zip(("scale_left", "scale_right", "scale_track"), k, sk):
         if abs(v - 1.0) > IMPLAUSIBLE:

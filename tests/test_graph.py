@@ -73,7 +73,7 @@ def test_robust_slip_rows_have_the_gradient_of_the_cauchy_cost():
         cm = linearize(prob, *B.retract(pose, W, -d)).cost
         grad_num = (cp - cm) / 2e-7
         # gradient of 0.5 ||A d - b||^2 at d = 0 is -A^T b, summed over every row touching block k
-        A1, A2, b = B._factor_arrays(prob, lin)
+        A1, A2, b = B.factor_arrays(prob, lin)
         grad = -(A1[k][:, j] @ b[k]) - (A2[k - 1][:, j] @ b[k - 1])
         assert grad == pytest.approx(grad_num, rel=1e-4, abs=1e-6)
 
@@ -88,7 +88,7 @@ def test_robust_measurement_rows_have_the_gradient_of_their_loss(kind):
     pose, W = B.initial_guess(prob, run_ekf(log, Schedule(10.0)))
     pose = pose + np.random.default_rng(5).normal(0, [0.1, 0.1, 0.03], pose.shape)  # many rows beyond k
     lin = linearize(prob, pose, W)
-    A1, A2, b = B._factor_arrays(prob, lin)
+    A1, A2, b = B.factor_arrays(prob, lin)
     for k in (5, 60):
         for j in (0, 1, 2, 3):
             d = np.zeros((prob.kf.n, NB))

@@ -38,17 +38,12 @@ from odomgraph.io.log import Log
 
 
 @dataclass(frozen=True)
-class SmootherOptions:
+class GraphOptions:
+    """The keyframe graph's options, which batch, isam2 and fixed-lag all
+    take (SmootherOptions adds the batch solver's, IncrementalOptions the
+    incremental smoothers')."""
     keyframe_hz: float = bounded(5.0, ge=0.01, le=1000)
     """Keyframe rate [Hz] (at most the encoder rate); slip is resolved at this rate."""
-    max_iterations: int = bounded(50, ge=1, integer=True)
-    rel_tol: float = bounded(1e-7, gt=0, lt=1)
-    """Stop when the cost decreases by less than this fraction,"""
-    abs_tol: float = bounded(0.01, gt=0)
-    """or by less than this much (cost = half the sum of whitened squares): a
-    chi-square change of 0.02 moves no estimate by a noticeable part of its
-    sigma, and the tight scale-factor chain otherwise crawls on for dozens of
-    iterations in its flat valley."""
     robust: str | None = bounded("cauchy", choices=("huber", "cauchy", "none"), optional=True)
     """Robust loss of GPS fixes and ranges: "cauchy" (default), "huber", or
     "none" (Gaussian). Real logs have outliers, some in the first seconds."""
@@ -68,17 +63,30 @@ class SmootherOptions:
     pin: tuple[tuple[str, str], ...] = ()
     """(scale combination, reason) pairs to hold at nominal with their prior
     sigma, as if the log could not determine them (observability)."""
+
+    def __post_init__(self):
+        check_fields(self)
+
+
+@dataclass(frozen=True)
+class SmootherOptions(GraphOptions):
+    """The batch smoother's options: the graph's, and its Gauss-Newton solver's."""
+    max_iterations: int = bounded(50, ge=1, integer=True)
+    rel_tol: float = bounded(1e-7, gt=0, lt=1)
+    """Stop when the cost decreases by less than this fraction,"""
+    abs_tol: float = bounded(0.01, gt=0)
+    """or by less than this much (cost = half the sum of whitened squares): a
+    chi-square change of 0.02 moves no estimate by a noticeable part of its
+    sigma, and the tight scale-factor chain otherwise crawls on for dozens of
+    iterations in its flat valley."""
     wheel_speed_units: bool = True
     """With a calibration window, take the v and slip random walks in
     wheel-speed units (graph.linearize): no prior then pays for shrinking the
     speeds into larger scale factors. False: the plain walks (as isam2,
     fixed-lag and the EKF)."""
 
-    def __post_init__(self):
-        check_fields(self)
 
-
-def build_problem(log: Log, schedule: Schedule, options: SmootherOptions, causal: bool = False) -> Problem:
+def build_problem(log: Log, schedule: Schedule, options: GraphOptions, causal: bool = False) -> Problem:
     """The keyframe graph of a log: same initialisation and schedule as the EKF.
     ``causal``: no interval's factors read data after its end (incremental smoothers)."""
     meas = from_log(log)
@@ -238,7 +246,7 @@ def growing_window_guess(prob: Problem, meas) -> tuple[np.ndarray, np.ndarray]:
     return pose, W
 
 
-def _factor_arrays(prob: Problem, lin: Linearization):
+def factor_arrays(prob: Problem, lin: Linearization):
     """Stack each interval's rows: A1 on block k, A2 on block k+1, b."""
     n1 = lin.A_u.shape[0]
     ru = lin.A_u.shape[1]
@@ -259,7 +267,7 @@ def _factor_arrays(prob: Problem, lin: Linearization):
 
 def gaussian_graph(prob: Problem, lin: Linearization) -> gtsam.GaussianFactorGraph:
     """The linearised problem as a GTSAM graph: one JacobianFactor per interval on (k, k+1)."""
-    A1, A2, b = _factor_arrays(prob, lin)
+    A1, A2, b = factor_arrays(prob, lin)
     g = gtsam.GaussianFactorGraph()
     g.add(gtsam.JacobianFactor(0, lin.A_p, lin.b_p, gtsam.noiseModel.Unit.Create(NB)))
     unit = gtsam.noiseModel.Unit.Create(A1.shape[1])
@@ -401,7 +409,7 @@ def solve_window(prob: Problem, pose: np.ndarray, W: np.ndarray, k0: int, k1: in
         if gnc and prob.gnc_scale > 1.0 and it > 1:
             prob.gnc_scale = max(1.0, 0.5 * prob.gnc_scale)
             lin, Ap, bp, cost = lin_at(pose, W)
-        A1, A2, b = _factor_arrays(prob, lin)
+        A1, A2, b = factor_arrays(prob, lin)
         g = gtsam.GaussianFactorGraph()
         unit = gtsam.noiseModel.Unit.Create(A1.shape[1])
         for j in range(n_w - 1):
@@ -571,7 +579,7 @@ def run_batch(log: Log, schedule: Schedule = Schedule(), options: SmootherOption
         est.range_bias = {b.id: {"value": float(v), "sigma": float(np.sqrt(Sgg[i, i]))}
                           for i, (b, v) in enumerate(zip(log.robot.beacons, rb))}
     est.wall_time_s = time.perf_counter() - wall0
-    est.n_updates = _n_measurements(prob)
+    est.n_updates = n_measurements(prob)
     est.t_switch = schedule.switch_time(prob.meas.t_start)
     est.calibration_sigma = np.sqrt(np.diagonal(Sig[-1])[S.SCALE])
     est.calibration_cov = Sig[-1][np.ix_(S.SCALE, S.SCALE)].copy()
@@ -607,6 +615,6 @@ def measurement_counts(prob: Problem) -> dict[str, int]:
     return {k: v for k, v in out.items() if v}
 
 
-def _n_measurements(prob: Problem) -> int:
+def n_measurements(prob: Problem) -> int:
     kf = prob.kf
     return int(kf.n - 1 + np.sum(kf.gyro_n) + np.sum(kf.vel_n) + kf.gps_k.size + kf.rng_k.size)

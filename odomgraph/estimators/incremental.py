@@ -37,7 +37,7 @@ from odomgraph.factors.motion import arc_at, propagate
 from odomgraph import state as St
 from odomgraph.checks import bounded
 from odomgraph.errors import EstimatorDivergedError
-from odomgraph.estimators.batch import (SmootherOptions, _factor_arrays, _n_measurements, build_problem,
+from odomgraph.estimators.batch import (GraphOptions, build_problem, factor_arrays, n_measurements,
                                         honest_blocks, keyframe_rows, marginal_blocks, measurement_counts, retract,
                                         solve_window, window_warnings)
 from odomgraph.estimators.graph import NB, Problem, linearize, robust_counts
@@ -54,7 +54,8 @@ S_IDX = [3, 4]
 
 
 @dataclass(frozen=True)
-class IncrementalOptions(SmootherOptions):
+class IncrementalOptions(GraphOptions):
+    """isam2's and fixed-lag's options: the graph's, and the incremental solvers'."""
     lag: float = bounded(5.0, gt=0)
     """Fixed-lag window [s] (fixed-lag only)."""
     relinearize_threshold: float = bounded(0.05, gt=0)
@@ -283,7 +284,7 @@ class _Runner:
                 progress(k, n)
         est = self.finish()
         est.wall_time_s = time.perf_counter() - wall0
-        est.n_updates = _n_measurements(self.prob)
+        est.n_updates = n_measurements(self.prob)
         est.t_switch = self.schedule.switch_time(self.prob.meas.t_start)
         est.update_times = self.update_times[1:]
         est.recoveries = list(self.recoveries)
@@ -632,7 +633,7 @@ class ISAM2Runner(_Runner):
 
         def build(pose, W):
             lin = linearize(self.prob, pose, W, k0, b)
-            A1, A2, rhs = _factor_arrays(self.prob, lin)
+            A1, A2, rhs = factor_arrays(self.prob, lin)
             g = gtsam.GaussianFactorGraph()
             unit = gtsam.noiseModel.Unit.Create(A1.shape[1])
             for j in range(b - k0):
