@@ -442,8 +442,10 @@ def simulate(
 @app.command()
 @_user_errors
 def estimate(
-    log_dir: Annotated[Path, typer.Argument(metavar="LOG", help="Log directory (LOG_FORMAT.md).")],
-    output: Annotated[Path, typer.Option("--output", "-o", help="Estimate directory to write.")],
+    log_dir: Annotated[list[Path], typer.Argument(
+        metavar="LOG...", help="Log directory (LOG_FORMAT.md); several, or a directory of logs, run as a fleet.")],
+    output: Annotated[Path, typer.Option("--output", "-o", help="Estimate directory to write (a fleet: one "
+                                                                 "per log inside it, and fleet.csv).")],
     method: Annotated[MethodName, typer.Option(help="Estimator.")] = MethodName.ekf,
     calibrate_until: Annotated[str, typer.Option(
         help="Seconds from the log start to estimate scale factors with slip forced to 0; "
@@ -477,6 +479,10 @@ def estimate(
                        "the arc between keyframes, with their sigma), for tools such as evo.")] = None,
     at: Annotated[Optional[AtName], typer.Option(
         help="Write the states at the truth's or the GPS fixes' times (interpolated as with --rate).")] = None,
+    workers: Annotated[Optional[int], typer.Option(
+        min=1, help="A fleet: local worker processes (default: all cores).")] = None,
+    scheduler: Annotated[Optional[str], typer.Option(
+        help="A fleet: Dask scheduler address tcp://HOST:PORT to run the logs on.")] = None,
 ):
     """Estimate states and odometry errors of a log; writes states.csv, trajectory.tum, summary.json
     (and online.csv, the causal estimate, for isam2; truth.tum when the log has truth).
@@ -488,15 +494,50 @@ def estimate(
     from odomgraph.io.log import read_log
     from odomgraph.pipeline import Method, estimate_to_dir
     schedule = _parse_schedule(calibrate_until, hold)
-    log = read_log(log_dir)
+    options = dict(gate=gate, keyframe_hz=keyframe_hz, lag=lag, slip_cauchy=slip_cauchy,
+                   robust=robust.value if robust else None, robust_k=robust_k, range_bias=range_bias or None,
+                   time_offset=time_offset, rate=rate, at=at.value if at else None)
+    if _is_fleet(log_dir, workers, scheduler):
+        _fleet("estimate", log_dir, output, Method(method.value), schedule, workers, scheduler, options)
+        return
+    log = read_log(log_dir[0])
     with _Progress(f"{method.value}") as bar:
-        s = estimate_to_dir(log, output, Method(method.value), schedule, progress=bar, gate=gate,
-                            keyframe_hz=keyframe_hz, lag=lag, slip_cauchy=slip_cauchy,
-                            robust=robust.value if robust else None, robust_k=robust_k,
-                            range_bias=range_bias or None, time_offset=time_offset, rate=rate,
-                            at=at.value if at else None)
+        s = estimate_to_dir(log, output, Method(method.value), schedule, progress=bar, **options)
     _print_summary(s)
     _out(f"wrote {output}")
+
+
+def _is_fleet(paths: list[Path], workers, scheduler) -> bool:
+    """Several logs, or one directory of logs: a fleet (odomgraph.fleet)."""
+    from odomgraph.errors import OdomgraphError
+    from odomgraph.fleet import is_log_dir
+    fleet = len(paths) > 1 or (paths[0].is_dir() and not is_log_dir(paths[0]))
+    if not fleet and (workers is not None or scheduler is not None):
+        raise OdomgraphError("--workers and --scheduler are for a fleet: several logs, or a directory of logs")
+    return fleet
+
+
+def _fleet(kind: str, paths, output: Path, method, schedule, workers, scheduler, options: dict) -> None:
+    """Run a fleet, print one line per log and where it went; exit 1 if any log failed."""
+    from odomgraph.errors import OdomgraphError
+    from odomgraph.fleet import run_fleet
+    if output.suffix == ".toml":
+        raise OdomgraphError(f"-o {output}: a fleet writes a directory (NAME.toml per log and fleet.csv); "
+                             "give -o DIR")
+    with _Progress(f"fleet {kind} ({method.value})") as bar:
+        rows = run_fleet(paths, output, kind, method, schedule, workers, scheduler, progress=bar, **options)
+    failed = [r for r in rows if r["result"] == "failed"]
+    for r in rows:
+        if r["result"] == "failed":
+            typer.echo(f"odomgraph: error: {r['name']}: {r['error']}", err=True)
+            continue
+        k = " ".join(f"{n.removeprefix('scale_')} {r[n]:.4f}" for n in ("scale_left", "scale_right", "scale_track")
+                     if r.get(n) is not None)
+        _out(f"{r['name']:<24} {r['status']:<9} {k}" + (f"  ({r['warnings']} warning(s))" if r["warnings"] else ""))
+    _out(f"wrote {output}/fleet.csv: {len(rows) - len(failed)} of {len(rows)} logs done"
+         + (f", {len(failed)} failed" if failed else ""))
+    if failed:
+        raise typer.Exit(code=1)
 
 
 @app.command()
@@ -610,8 +651,11 @@ def montecarlo(
 @app.command()
 @_user_errors
 def calibrate(
-    log_dir: Annotated[Path, typer.Argument(metavar="LOG", help="A calibration log (LOG_FORMAT.md).")],
-    output: Annotated[Path, typer.Option("--output", "-o", help="robot.toml to write.")]
+    log_dir: Annotated[list[Path], typer.Argument(
+        metavar="LOG...", help="A calibration log (LOG_FORMAT.md); several, or a directory of logs, run as a "
+                               "fleet.")],
+    output: Annotated[Path, typer.Option("--output", "-o", help="robot.toml to write (a fleet: a directory, "
+                                                                 "with NAME.toml per log and fleet.csv).")]
     = Path("robot-calibrated.toml"),
     method: Annotated[MethodName, typer.Option(help="Estimator (a smoother; ekf works too).")] = MethodName.batch,
     calibrate_until: Annotated[str, typer.Option(
@@ -626,13 +670,21 @@ def calibrate(
     time_offset: Annotated[bool, typer.Option(
         "--time-offset", help="Estimate the GPS time offset against the wheels, apply it, and write it as "
                               "[gps] time_offset.")] = False,
+    workers: Annotated[Optional[int], typer.Option(
+        min=1, help="A fleet: local worker processes (default: all cores).")] = None,
+    scheduler: Annotated[Optional[str], typer.Option(
+        help="A fleet: Dask scheduler address tcp://HOST:PORT to run the logs on.")] = None,
 ):
     """Estimate corrected ticks per metre and track width from a calibration log and write them
     (with their 1-sigma) as a robot.toml. Run it once after changing tyres."""
     from odomgraph.io.log import read_log
     from odomgraph.pipeline import Method, calibrate_to_file
     schedule = _parse_schedule(calibrate_until, HoldName.consider)
-    log = read_log(log_dir)
+    if _is_fleet(log_dir, workers, scheduler):
+        _fleet("calibrate", log_dir, output, Method(method.value), schedule, workers, scheduler,
+               dict(tune=tune, force=force, **({"time_offset": True} if time_offset else {})))
+        return
+    log = read_log(log_dir[0])
     with _Progress(f"calibrate ({method.value})") as bar:
         new, rep = calibrate_to_file(log, output, schedule, Method(method.value), progress=bar, tune=tune,
                                      force=force, **({"time_offset": True} if time_offset else {}))

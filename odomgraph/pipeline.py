@@ -494,8 +494,10 @@ def _calibration_checks(log: Log, est: Estimate, k, sk, method: Method, schedule
         # A GPS clock off against the wheels biases every scale factor (0.5 s
         # early gave 14-21 sigma): refuse rather than write it.
         from odomgraph.analysis.timing import gps_offset_warnings
-        # A lever-arm line names its own remedy; a clock line gets the option that estimates it.
-        problems += [w if "lever arm" in w and "time stamps" not in w else f"{w} (calibrate --time-offset estimates it)"
+        # A plain clock line gets the option that estimates it; a lever-arm
+        # line, or one that cannot tell the two apart, names its own remedy.
+        problems += [f"{w} (calibrate --time-offset estimates it)"
+                     if w.startswith("GPS time stamps look") and "lever arm" not in w else w
                      for w in gps_offset_warnings(log, est)]
     unobs = est.unobservable()
     for name, v, s in zip(("scale_left", "scale_right", "scale_track"), k, sk):

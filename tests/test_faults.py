@@ -6,7 +6,6 @@ import numpy as np
 import pytest
 from typer.testing import CliRunner
 
-from odomgraph.analysis.faults import CASES
 from odomgraph.runs import run_case
 from odomgraph.cli import app
 from odomgraph.io.log import read_log

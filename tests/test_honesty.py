@@ -102,8 +102,9 @@ def _republished(g, rate: float):
     """Each fix of ``g`` re-sent at ``rate`` Hz with new stamps and the same
     position, until the next fix (a receiver driver's stale copies)."""
     t, x, y = [], [], []
+    period = float(np.median(np.diff(g.t)))
     for k in range(len(g.t)):
-        end = g.t[k + 1] if k + 1 < len(g.t) else g.t[k] + 1.0
+        end = g.t[k + 1] if k + 1 < len(g.t) else g.t[k] + period
         n = max(1, int(np.floor((end - g.t[k]) * rate - 1e-9)))
         t += list(g.t[k] + np.arange(n) / rate)
         x += [g.x[k]] * n
@@ -191,3 +192,58 @@ def test_a_gps_outage_is_not_read_as_a_wiring_mistake(seed):
     for name, true in zip(NAMES, sc.scales):
         w = name.removeprefix("scale_")
         assert abs(rep["scale"][w] - true) < 0.01, (name, rep["scale"][w], true)
+
+
+@pytest.mark.parametrize("gps_hz, method", [(10.0, "batch"), (2.0, "ekf")])
+def test_identical_fresh_fixes_at_a_stall_are_kept(gps_hz, method):
+    """A receiver in a static-hold mode repeats its position exactly while the
+    robot stands; those fixes are what tells a stall (wheels spinning in
+    place) from driving. They are fresh fixes, one per receiver period, and
+    must not be taken for re-published copies (a review of the first fix)."""
+    from odomgraph.estimators.measurements import repeated_fixes
+    from odomgraph.sim.faults import Stall
+    sc = paper(80.0).with_(write_initial=True, slips=(), rates=Rates(encoders=20.0, gyro=20.0, gps=gps_hz))
+    log = inject(sc, Faults(stalls=(Stall(40.0, 55.0, 0.5, 0.5),)), 71)
+    g = log.gps
+    held = (g.t > 40.5) & (g.t < 55.0)
+    x, y = g.x.copy(), g.y.copy()
+    x[held], y[held] = x[held][0], y[held][0]           # every fix of the stall identical
+    log = log.with_(gps=replace(g, x=x, y=y))
+    assert not repeated_fixes(log.gps).any()
+    est = estimate(log, method, Schedule(20.0))
+    assert not any("repeat" in w for w in est.warnings)
+    mid = (est.t > 44.0) & (est.t < 52.0)
+    slip = est.mean[mid][:, 6:8]
+    assert np.all(np.abs(np.median(slip, axis=0) - 0.5) < 0.1), np.median(slip, axis=0)
+
+
+def test_a_stall_in_a_republishing_log_keeps_one_fix_per_receiver_period():
+    from odomgraph.estimators.measurements import repeated_fixes
+    from odomgraph.sim.faults import Stall
+    sc = paper(80.0).with_(write_initial=True, slips=(), rates=Rates(encoders=20.0, gyro=20.0, gps=1.0))
+    log = inject(sc, Faults(stalls=(Stall(40.0, 55.0, 0.5, 0.5),)), 72)
+    g = log.gps
+    held = (g.t > 40.5) & (g.t < 55.0)
+    x, y = g.x.copy(), g.y.copy()
+    x[held], y[held] = x[held][0], y[held][0]
+    stale = _republished(replace(g, x=x, y=y), 10.0)
+    keep = ~repeated_fixes(stale)
+    in_stall = (stale.t > 40.5) & (stale.t < 55.0)
+    # about one fix per 1.5 s of the 14.5 s stall, and elsewhere one per receiver fix
+    assert 7 <= int(np.sum(keep & in_stall)) <= 12
+    assert int(np.sum(keep & ~in_stall)) == int(np.sum(~held))
+    est = estimate(log.with_(gps=stale), "batch", Schedule(20.0))
+    mid = (est.t > 44.0) & (est.t < 52.0)
+    assert np.all(np.abs(np.median(est.mean[mid][:, 6:8], axis=0) - 0.5) < 0.1)
+
+
+def test_a_stuck_wheel_while_the_other_spins_in_place_is_slip_not_a_dead_encoder():
+    """The robot stands (fixes still, gyro still), the right wheel spins and
+    the left one is stuck and reads 0, rightly: that is slip, not a fault
+    of the left encoder (a review of the first dead-encoder check)."""
+    from odomgraph.sim.faults import Stall
+    sc = paper(80.0).with_(write_initial=True, slips=())
+    log = inject(sc, Faults(stalls=(Stall(40.0, 55.0, 0.0, 0.6),)), 73)
+    log = _zero_left(log, 40.3, 54.7)                 # a stuck wheel's encoder reads exactly 0
+    est = estimate(log, "batch", Schedule(20.0))
+    assert not any("encoder reads 0" in w for w in est.warnings), est.warnings

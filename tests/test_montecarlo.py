@@ -15,7 +15,7 @@ from odomgraph.errors import EstimatorDivergedError, OdomgraphError
 from odomgraph.estimators.ekf import EKFOptions, run_ekf
 from odomgraph.estimators.ekf_many import run_ekf_many
 from odomgraph.estimators.schedule import Hold, Schedule
-from odomgraph.io.log import Gps, Gyro
+from odomgraph.io.log import Gyro
 from odomgraph.sim.sensor_configs import study_scenario
 from odomgraph.sim.simulate import simulate
 

@@ -3,7 +3,6 @@ simulated ranges, exact marginals with a global variable, and exercised on the
 real libRSF UWB cut."""
 from pathlib import Path
 
-import gtsam
 import numpy as np
 import pytest
 from typer.testing import CliRunner

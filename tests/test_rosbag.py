@@ -1,6 +1,5 @@
 """The rosbag importer: a ROS 2 bag written with rosbags itself from a
 simulated log (JointState wheel positions, NavSatFix, Imu), imported back."""
-from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -374,7 +373,6 @@ def test_a_real_clock_gives_the_same_estimates(tmp_path):
     estimator then gives the same states to 1e-9 relative (measured: at most
     4e-11 m, the EKF; 2e-13 the smoothers), the states.csv it writes holds the absolute stamps, digit
     for digit, and the comparison's metrics are the same."""
-    import json
 
     from odomgraph.analysis.compare import comparison_metrics
     from odomgraph.io.log import write_log

@@ -19,9 +19,8 @@ import pytest
 from typer.testing import CliRunner
 
 from odomgraph.cli import app
-from odomgraph.errors import LogFormatError, OutputDirError
 from odomgraph.io.log import read_log, write_log
-from odomgraph.io.outdir import MARKER, atomic_output_dir
+from odomgraph.io.outdir import MARKER
 from odomgraph.sim.scenarios import paper
 from odomgraph.sim.simulate import simulate
 

@@ -82,7 +82,6 @@ def score_fixes(log, scales, t0: float, t1: float, window: float = WINDOW, skip=
     if g is None or len(g.t) < MIN_FIXES:
         return None
     t_dr, a_dr = _wheel_antenna(log, tuple(scales))
-    sig = g.sigma if g.sigma is not None else np.full(len(g.t), log.robot.gps_sigma)
     inside = (g.t >= max(t0, t_dr[0])) & (g.t <= min(t1, t_dr[-1]))
     if inside.sum() < MIN_FIXES:
         return None

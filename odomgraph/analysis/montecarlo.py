@@ -229,83 +229,9 @@ def run_study(spec: StudySpec, directory, workers: int | None = None, scheduler:
 
     if progress is not None:
         progress(len(done), total)
-    if todo:
-        if client is not None or scheduler is not None:
-            _run_dask(todo, scheduler, client, finished)
-        else:
-            _run_local(todo, workers, finished)
+    from odomgraph.jobs import run_jobs
+    run_jobs(run_point, todo, finished, workers, scheduler, client)
     return [done[p.key] for p in spec.points()]
-
-
-def _worker_init(parent: int) -> None:
-    """Set up a local worker: it leaves Ctrl-C and SIGTERM to the parent (which
-    terminates the pool), and exits by itself when the parent is gone, even
-    after a SIGKILL that gave the parent no chance to clean up."""
-    import signal
-    import threading
-    signal.signal(signal.SIGINT, signal.SIG_IGN)
-    signal.signal(signal.SIGTERM, signal.SIG_DFL)
-    try:   # Linux: the kernel sends SIGTERM when the parent dies
-        import ctypes
-        ctypes.CDLL(None, use_errno=True).prctl(1, signal.SIGTERM)   # PR_SET_PDEATHSIG
-    except (OSError, AttributeError):
-        pass
-
-    def watch():
-        import time
-        while os.getppid() == parent:
-            time.sleep(1.0)
-        os._exit(1)
-    threading.Thread(target=watch, daemon=True).start()
-    if os.getppid() != parent:      # died before the watch started
-        os._exit(1)
-
-
-def _run_local(todo, workers, finished):
-    import multiprocessing as mp
-    workers = workers or os.cpu_count() or 1
-    if workers <= 1:
-        for p in todo:
-            finished(p, run_point(p))
-        return
-    pool = mp.get_context("fork").Pool(min(workers, len(todo)), initializer=_worker_init, initargs=(os.getpid(),))
-    try:
-        for p, r in pool.imap_unordered(_run_indexed, list(enumerate(todo))):
-            finished(todo[p], r)
-        pool.close()
-    except BaseException:
-        # Ctrl-C, SIGTERM (raised as KeyboardInterrupt by the CLI) or a failed
-        # point: stop the workers now instead of waiting for their points.
-        pool.terminate()
-        raise
-    finally:
-        pool.join()
-
-
-def _run_indexed(item):
-    i, p = item
-    return i, run_point(p)
-
-
-def _run_dask(todo, scheduler, client, finished):
-    try:
-        from dask.distributed import Client, as_completed
-    except ImportError:
-        raise OdomgraphError("--scheduler needs Dask: pip install 'odomgraph[dask]'") from None
-    own = client is None
-    if own:
-        try:
-            client = Client(scheduler, timeout="10s")
-        except (OSError, TimeoutError) as exc:
-            raise OdomgraphError(f"--scheduler {scheduler}: cannot connect ({exc})") from None
-    try:
-        futures = client.map(run_point, todo, pure=False)
-        key = {f.key: p for f, p in zip(futures, todo)}
-        for f in as_completed(futures):
-            finished(key[f.key], f.result())
-    finally:
-        if own:
-            client.close()
 
 
 # ---------------------------------------------------------------- outputs

@@ -68,6 +68,8 @@ def dead_encoder_warnings(log) -> list[str]:
                     pivot = np.median(other[a:b]) / log.robot.track_width
                     if np.median(np.abs(gyro[1][sel])) > 0.5 * pivot:
                         continue                   # the gyro turns as a pivot would: a real pivot
+            if _fixes_still(log, t0, t1, float(np.median(other[a:b])) * (t1 - t0)):
+                continue                           # the robot stands: the other wheel spins (slip), this one is right
             spans.append((t0, t1))
         if spans:
             total = sum(b - a for a, b in spans)
@@ -77,6 +79,21 @@ def dead_encoder_warnings(log) -> list[str]:
             out.append(f"the {name} encoder reads 0 for {total:.0f} s ({where}) while the other wheel moves: {why}; "
                        "those stretches are estimated as slip")
     return out
+
+
+def _fixes_still(log, t0: float, t1: float, wheel_travel: float) -> bool:
+    """The GPS fixes over [t0, t1] moved less than a quarter of what the
+    moving wheel says (and stay within a few sigma of where they were): the
+    robot stood, a stuck wheel read 0 rightly while the other spun."""
+    g = log.gps
+    if g is None or len(g.t) < 2:
+        return False
+    sel = (g.t >= t0) & (g.t <= t1)
+    if sel.sum() < 3:
+        return False
+    spread = float(np.hypot(np.ptp(g.x[sel]), np.ptp(g.y[sel])))
+    sig = float(np.median(g.sigma[sel])) if g.sigma is not None else log.robot.gps_sigma
+    return spread < max(0.25 * wheel_travel, 6.0 * sig)
 
 
 def mounting_warnings(log) -> list[str]:

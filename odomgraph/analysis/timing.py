@@ -205,8 +205,6 @@ def window_offsets(log, scales=(1.0, 1.0, 1.0), skip=(), max_misfit: float | Non
             delta += step
             if abs(step) < 1e-4:
                 break
-        else:
-            pass
         if ok is None or ok.sum() < MIN_FIXES or not (TRIALS[0] < delta < TRIALS[-1]):
             continue
         A, r, chi2, dof = _window_system(path, tf[ok], p[ok], w[ok], delta)
@@ -449,9 +447,9 @@ def _offset_lines(parts: list[Offset], j: JointFit | None = None, lever=(0.0, 0.
     elif not time_off and alone:
         # With the lever arm held, an offset shows; with it free, neither
         # does: at one speed the two move the antenna alike.
-        dx = j.along * whole.delta if j is not None else float("nan")
+        by = f" by about {j.along * whole.delta:+.2f} m" if j is not None else ""
         out.append(f"GPS time stamps look {whole.delta:+.2f} s late (sigma {whole.sigma:.2f} s) against the wheels, "
-                   f"or the GPS lever arm is off by about {dx:+.2f} m along the robot's x axis: this log cannot "
+                   f"or the GPS lever arm is off{by} along the robot's x axis: this log cannot "
                    "tell the two apart (its speed hardly varies and it hardly turns); check [gps] lever_arm "
                    "before you set [gps] time_offset")
     if lever_off:

@@ -153,7 +153,6 @@ class _Graph:
         EKF's gate, ekf.gate_reference): whitened residual and its distance
         from the median of the last GATE_HISTORY both beyond FIRST_GATE. Zeroed
         rows are dropped from the factor; the count is kept in self.gated."""
-        from odomgraph.estimators.ekf import GATE_HISTORY, gate_reference
         kf, prob = self.prob.kf, self.lin_first
         g0, g1 = np.searchsorted(kf.gps_k, [k, k + 1])
         for i in range(g0, g1):

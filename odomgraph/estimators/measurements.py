@@ -58,7 +58,7 @@ def from_log(log: Log) -> Measurements:
             raise LogFormatError((log.path / name) if log.path else name,
                                  "time does not increase (read the log with read_log, which drops rows written "
                                  "twice)")
-    notes = repeat_notes(log)
+    notes = []
     log, spikes = clean(log)
     r = log.robot
     a, b = r.encoder_sigma
@@ -209,18 +209,48 @@ def despike(log: Log) -> tuple[Log, dict[str, int]]:
     return log, counts
 
 
+#: Fixes are re-published copies when the distinct positions come at least
+#: this many times slower than the rows (1 Hz fixes sent at 10 Hz: 10x).
+REPUBLISH_RATIO = 1.5
+
+
 def repeated_fixes(gps) -> np.ndarray:
-    """(K,) mask of fixes that repeat the fix before them exactly (x, y and
-    sigma): a receiver driver re-publishing its last fix at its own rate
-    (1 Hz fixes sent at 10 Hz). Each copy carries a new stamp and an old
-    position; read as ten fixes it says the robot stood still nine tenths of
-    the time (a probe's log: scale factors 5-7 sigma off, status ok). A
-    fresh fix never equals the last one to the bit while the robot moves,
-    and at a standstill dropping the copies loses nothing new."""
+    """(K,) mask of the rows that re-publish an earlier fix: a receiver driver
+    that sends its last fix at its own rate (1 Hz fixes at 10 Hz). Each copy
+    carries a new stamp and an old position; read as ten fixes it says the
+    robot stood still nine tenths of the time (a probe's log: scale factors
+    5-7 sigma off, status ok).
+
+    A row repeating the one before exactly (x, y and sigma) is a copy only
+    when the log re-publishes: its distinct positions come REPUBLISH_RATIO
+    times slower than its rows. A receiver that sends each fix once can
+    still repeat a position exactly, at a standstill (quantised output, a
+    static-hold mode), and those fixes are the evidence that the robot
+    stands while its wheels spin: they are all kept. In a re-publishing log
+    a run longer than a fix interval holds fresh fixes too: one row per 1.5
+    fix intervals of it is kept."""
     same = (gps.x[1:] == gps.x[:-1]) & (gps.y[1:] == gps.y[:-1])
     if gps.sigma is not None:
         same &= gps.sigma[1:] == gps.sigma[:-1]
-    return np.concatenate([[False], same])
+    mask = np.concatenate([[False], same])
+    if not mask.any() or mask.sum() == len(mask) - 1:
+        return np.zeros(len(mask), bool)       # no repeats, or a single position (nothing moves at all)
+    t = np.asarray(gps.t, float)
+    dt_rows = float(np.median(np.diff(t)))
+    dt_fix = float(np.median(np.diff(t[~mask])))
+    if not dt_fix >= REPUBLISH_RATIO * dt_rows:
+        return np.zeros(len(mask), bool)
+    kept = 0.0
+    for k in np.flatnonzero(mask):
+        if not mask[k - 1]:
+            kept = t[k - 1]                    # the run's first row, a distinct fix
+        # Copies come about dt_fix after their fix at most (the receiver's
+        # jitter stretches some intervals); a run that lasts longer holds the
+        # receiver's later fixes, repeating the position at a standstill:
+        # one row per 1.5 dt_fix is kept as such.
+        if t[k] - kept >= 1.5 * dt_fix:
+            mask[k], kept = False, t[k]
+    return mask
 
 
 def repeat_notes(log: Log) -> list[str]:
@@ -240,7 +270,8 @@ def clean(log: Log) -> tuple[Log, dict[str, int]]:
     nearest the fix), GPS stamps moved back by the configured
     ``[gps] time_offset`` (a fix stamped t was taken at t - offset), then
     ``despike``. Returns it with the spikes taken out per sensor (the
-    repeated fixes are not rejections: ``repeat_notes`` says them)."""
+    repeated fixes are not rejections: ``repeat_notes`` says them, and
+    pipeline.estimate makes that a warning)."""
     from dataclasses import replace
     if log.gps is not None and len(log.gps.t) > 1:
         rep = repeated_fixes(log.gps)

@@ -146,7 +146,10 @@ def _foreign_entries(d: Path) -> list[str]:
     listed = set(m["files"])
     out = [e for e in present if e != MARKER and e not in listed]
     # Markers before the hashes were recorded have none: their names are all there is to check.
-    for name, h in (m.get("sha256") or {}).items():
+    hashes = m.get("sha256")
+    if hashes is not None and not isinstance(hashes, dict):
+        return [MARKER + " (not one odomgraph wrote)"]
+    for name, h in (hashes or {}).items():
         f = d / name
         try:
             if f.is_file() and _sha256(f) != h:

@@ -21,7 +21,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from odomgraph.errors import OptionError
-from odomgraph.io.log import Encoders, Gps, Gyro, Log, Ranges, Velocity, WheelSpeeds
+from odomgraph.io.log import Encoders, Gps, Gyro, Log, Ranges, WheelSpeeds
 from odomgraph.sim.scenarios import Scenario, Segment, SlipEvent
 
 SENSORS = ("encoders", "gps", "gyro", "ranges", "velocity")

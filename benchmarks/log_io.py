@@ -1,0 +1,116 @@
+"""Issue 17's log I/O: how fast a log is read, and how much memory that takes,
+against the files' size; and how fast states.csv is written.
+
+The logs are the paper scenario at the one-hour benchmark's rates (encoders
+and gyro 20 Hz, GPS 10 Hz; truth 100 Hz, as a simulated truth.csv), 10, 30
+and 60 minutes long. Each measurement runs in its own process, so its peak
+memory (ru_maxrss) is its own; the baseline of a process that only imports
+odomgraph is measured the same way and subtracted. The peer is
+``numpy.loadtxt`` reading the same CSV files (header skipped), named and
+timed in the same run. Targets (issue 17): at least 50 MB/s, peak memory at
+most 3x the files.
+
+python -m benchmarks.log_io [--minutes 10 30 60]
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+from benchmarks._common import save
+
+_CHILD = r"""
+import json, resource, sys, time
+from pathlib import Path
+what, d = sys.argv[1], Path(sys.argv[2])
+import numpy as np
+import odomgraph.io.log as L
+base = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+t0 = time.perf_counter()
+if what == "read":
+    log = L.read_log(d)
+elif what == "read-no-truth":
+    for f in ("truth.csv",):
+        (d / f).rename(d / (f + ".aside"))
+    try:
+        log = L.read_log(d)
+    finally:
+        (d / "truth.csv.aside").rename(d / "truth.csv")
+elif what == "loadtxt":
+    for f in sorted(d.glob("*.csv")):
+        np.loadtxt(f, delimiter=",", skiprows=1, ndmin=2)
+elif what == "write-states":
+    from odomgraph.io.estimate import read_states, write_states
+    est = read_states(d / "states.csv")
+    t0 = time.perf_counter()
+    write_states(d / "states-again.csv", est)
+wall = time.perf_counter() - t0
+peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+print(json.dumps({"wall_s": wall, "peak_kb": peak, "base_kb": base}))
+"""
+
+
+def _measure(what: str, d: Path) -> dict:
+    out = subprocess.run([sys.executable, "-c", _CHILD, what, str(d)], capture_output=True, text=True, check=True)
+    return json.loads(out.stdout.strip().splitlines()[-1])
+
+
+def main(argv=None) -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--minutes", type=float, nargs="*", default=[10.0, 30.0, 60.0])
+    args = ap.parse_args(argv)
+    from odomgraph.estimators.ekf import run_ekf
+    from odomgraph.estimators.schedule import Schedule
+    from odomgraph.io.estimate import write_states
+    from odomgraph.io.log import write_log
+    from odomgraph.sim.scenarios import Rates, paper
+    from odomgraph.sim.simulate import simulate
+    runs = []
+    with tempfile.TemporaryDirectory() as tmp:
+        for minutes in args.minutes:
+            d = Path(tmp) / f"log{minutes:g}"
+            log = simulate(paper(60.0 * minutes).with_(rates=Rates(encoders=20.0, gyro=20.0, gps=10.0,
+                                                                   truth=100.0)), 0)
+            write_log(log, d)
+            write_states(d / "states.csv", run_ekf(log, Schedule(20.0)))
+            sizes = {p.name: p.stat().st_size for p in d.glob("*.csv")}
+            log_bytes = sum(v for k, v in sizes.items() if k != "states.csv")
+            truth_bytes = sizes.get("truth.csv", 0)
+            row = {"minutes": minutes, "log_bytes": log_bytes, "truth_bytes": truth_bytes,
+                   "states_bytes": sizes["states.csv"]}
+            (d / "states.csv").rename(Path(tmp) / "states.csv")
+            for what in ("read", "read-no-truth", "loadtxt"):
+                row[what] = _measure(what, d)
+            (Path(tmp) / "states.csv").rename(d / "states.csv")
+            row["write-states"] = _measure("write-states", d)
+            runs.append(row)
+            print(json.dumps(row), flush=True)
+    lines = ["# Log I/O (issue 17)", "",
+             "Each cell is one process; peak memory is its ru_maxrss less that of the process before the read "
+             "(odomgraph and numpy imported). The peer is `numpy.loadtxt` on the same CSV files.", "",
+             "| log | files | read | MB/s | peak over files | without truth.csv | numpy.loadtxt | MB/s | "
+             "write states.csv |", "|---|---|---|---|---|---|---|---|---|"]
+    for r in runs:
+        mb = r["log_bytes"] / 1e6
+        rd, nt, lt, ws = r["read"], r["read-no-truth"], r["loadtxt"], r["write-states"]
+        extra = (rd["peak_kb"] - rd["base_kb"]) * 1024 / r["log_bytes"]
+        lines.append(f"| {r['minutes']:g} min | {mb:.1f} MB (truth {r['truth_bytes'] / 1e6:.1f}) | "
+                     f"{rd['wall_s']:.2f} s | {mb / rd['wall_s']:.0f} | {extra:.1f}x | {nt['wall_s']:.2f} s | "
+                     f"{lt['wall_s']:.2f} s | {mb / lt['wall_s']:.0f} | {ws['wall_s']:.2f} s "
+                     f"({r['states_bytes'] / 1e6:.1f} MB) |")
+    last = runs[-1]
+    speed = last["log_bytes"] / 1e6 / last["read"]["wall_s"]
+    extra = (last["read"]["peak_kb"] - last["read"]["base_kb"]) * 1024 / last["log_bytes"]
+    lines += ["", f"Targets (issue 17): read at 50 MB/s or more ({'met' if speed >= 50 else 'missed'}: "
+                  f"{speed:.0f} MB/s on the longest log), peak memory at most 3x the files "
+                  f"({'met' if extra <= 3 else 'missed'}: {extra:.1f}x); `read_log` reads truth.csv, which no "
+                  "estimator uses, on every run."]
+    save("log_io", {"runs": runs, "targets": {"mb_per_s": 50.0, "peak_over_files": 3.0}}, "\n".join(lines))
+
+
+if __name__ == "__main__":
+    main()
