@@ -492,7 +492,6 @@ class ISAM2Runner(_Runner):
         """(factors, values, solve_window prior) that start an ISAM2 at keyframe
         seg_start: the previous segment's hand-over marginal, or the problem's
         prior at keyframe 0."""
-        b = self.seg_start
         if not self.segments:
             return (self.graph.prior_factors(self.pose, self.W), self.graph.values(0, self.pose, self.W), None)
         seg = self.segments[-1]
