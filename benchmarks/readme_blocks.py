@@ -1041,7 +1041,9 @@ def report_size(results: Path) -> str:
     if fb:
         out += (f" The page inlines plotly.js's cartesian bundle ({d['bundle_bytes'] / 1e6:.1f} MB); with the "
                 f"full bundle it was {fb['report_bytes'] / 1e6:.1f} MB and took {fb['median_load_ms'] / 1e3:.2f} s.")
-    return out + f"\n{_source('report_size', d)}"
+    # inside a list item of README.md's command list: indented as its text
+    import textwrap
+    return textwrap.indent(textwrap.fill(out, 74) + f"\n{_source('report_size', d)}", "    ")
 
 
 BLOCKS = {f.__name__: f for f in (
