@@ -75,7 +75,7 @@ def straightforward_graph(prob, k0: int = 0, k1: int | None = None):
     from gtsam.symbol_shorthand import S as SK, W as WK, X as XK
     from odomgraph.factors import gtsam_factors as gf
     from odomgraph.estimators.incremental import S_IDX, W_IDX
-    kf, r, pn = prob.kf, prob.robot, prob.robot.process
+    kf, r = prob.kf, prob.robot
     k1 = kf.n - 1 if k1 is None else k1
     g = gtsam.NonlinearFactorGraph()
     if k0 == 0:

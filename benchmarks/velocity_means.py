@@ -14,7 +14,7 @@ import dataclasses
 import numpy as np
 
 from benchmarks._common import save
-from odomgraph.estimators.keyframes import _bin, build_keyframes
+from odomgraph.estimators.keyframes import bin_times, build_keyframes
 from odomgraph.sim.sensor_configs import study_scenario
 from odomgraph.sim.simulate import simulate
 
@@ -42,7 +42,7 @@ def main():
         err_i.append(e)
         sd_i.append(kf.vel_sigma[ok, 0])
         z_i.append(e / kf.vel_sigma[ok, 0])
-        k, inside = _bin(kf.t, log.velocity.t)
+        k, inside = bin_times(kf.t, log.velocity.t)
         n = np.bincount(k[inside], minlength=kf.n - 1)
         mean = np.bincount(k[inside], log.velocity.v[inside], minlength=kf.n - 1) / np.maximum(n, 1)
         err_p.append(mean[n > 0] - truth[n > 0])

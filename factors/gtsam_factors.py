@@ -24,7 +24,7 @@ import gtsam
 import numpy as np
 
 from odomgraph.factors import encoder, gps, gyro, pose2, pseudo, ranging, velocity
-from odomgraph.factors.motion import arc_at, propagate, transition_residual
+from odomgraph.factors.motion import arc_at, transition_residual
 
 
 def _pose(values, key):

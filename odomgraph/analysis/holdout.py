@@ -75,13 +75,13 @@ def score_fixes(log, scales, t0: float, t1: float, window: float = WINDOW, skip=
     windows of about ``window`` seconds, or None. Windows that overlap a
     ``skip`` span (t_a, t_b) are left out: a slip bends the wheels' path
     whatever the parameters, and would decide the contest by itself."""
-    from odomgraph.analysis.timing import _misfit, _wheel_antenna
+    from odomgraph.analysis.timing import rigid_misfit, wheel_antenna
     from odomgraph.estimators.measurements import clean
     log = clean(log)[0]
     g = log.gps
     if g is None or len(g.t) < MIN_FIXES:
         return None
-    t_dr, a_dr = _wheel_antenna(log, tuple(scales))
+    t_dr, a_dr = wheel_antenna(log, tuple(scales))
     inside = (g.t >= max(t0, t_dr[0])) & (g.t <= min(t1, t_dr[-1]))
     if inside.sum() < MIN_FIXES:
         return None
@@ -94,7 +94,7 @@ def score_fixes(log, scales, t0: float, t1: float, window: float = WINDOW, skip=
         d = np.stack([np.interp(tf, t_dr, a_dr[:, 0]), np.interp(tf, t_dr, a_dr[:, 1])], -1)
         p = np.stack([g.x[sel], g.y[sel]], -1)
         # Equal weights: the score is a distance, and the comparison is the same for both sets.
-        sse += _misfit(d, p, np.ones(len(tf)))
+        sse += rigid_misfit(d, p, np.ones(len(tf)))
         n += int(sel.sum())
     return (float(np.sqrt(sse / n)), n) if n else None
 

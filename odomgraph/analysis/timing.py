@@ -43,21 +43,21 @@ class Offset:
         return abs(self.delta) > max(N_SIGMA * self.sigma, MIN_OFFSET)
 
 
-def _wheel_antenna(log, scales):
+def wheel_antenna(log, scales):
     """(times (K+1,), antenna positions (K+1, 2)) of dead reckoning from the
     first wheel measurement with the given scale factors."""
-    t, dr = _wheel_poses(log, scales)
+    t, dr = wheel_poses(log, scales)
     lx, ly = log.robot.gps_lever_arm
     c, s = np.cos(dr[:, 2]), np.sin(dr[:, 2])
     return t, np.stack([dr[:, 0] + c * lx - s * ly, dr[:, 1] + s * lx + c * ly], -1)
 
 
-def _wheel_poses(log, scales):
+def wheel_poses(log, scales):
     from odomgraph.estimators.measurements import dead_reckoning, from_log
     return dead_reckoning(from_log(log), log.robot.track_width, scales)
 
 
-def _misfit(d, p, w):
+def rigid_misfit(d, p, w):
     """Weighted rigid-fit residual sum of squares of p ~ R d + c (closed form)."""
     from odomgraph.estimators.initial import rigid_fit
     phi, c = rigid_fit(d, p, w)
@@ -71,7 +71,7 @@ class _Path:
     for a lever arm changed by ``dl`` (robot frame) from the configured one."""
 
     def __init__(self, log, scales):
-        self.t, self.pose = _wheel_poses(log, scales)
+        self.t, self.pose = wheel_poses(log, scales)
         self.lever = np.array(log.robot.gps_lever_arm, float)
         # The derivative is taken over a span of several wheel intervals: the
         # interpolated path has a kink at each node (a 0.02 s step saw them
@@ -186,7 +186,7 @@ def window_offsets(log, scales=(1.0, 1.0, 1.0), skip=(), max_misfit: float | Non
 
         def cost(dl):
             ok = _inside(path, tf, dl)
-            return _misfit(path.antenna(tf[ok] - dl), p[ok], w[ok]) * len(tf) / max(1, ok.sum())
+            return rigid_misfit(path.antenna(tf[ok] - dl), p[ok], w[ok]) * len(tf) / max(1, ok.sum())
         # coarse over TRIALS (per fix: the fixes on the path change with the shift)
         coarse = np.array([cost(dl) for dl in TRIALS])
         i = int(np.argmin(coarse))

@@ -156,7 +156,7 @@ def robust_initial_guess(prob: Problem, meas) -> tuple[np.ndarray, np.ndarray]:
     without fixes is plain dead reckoning.
     """
     from odomgraph.factors.motion import integrate
-    from odomgraph.estimators.initial import _range_fixes, rigid_fit, rigid_ransac
+    from odomgraph.estimators.initial import range_fixes, rigid_fit, rigid_ransac
     kf, r = prob.kf, prob.robot
     v = kf.enc_m.mean(1)
     w = (kf.enc_m[:, 1] - kf.enc_m[:, 0]) / r.track_width
@@ -170,7 +170,7 @@ def robust_initial_guess(prob: Problem, meas) -> tuple[np.ndarray, np.ndarray]:
     if meas.gps is not None:
         fixes = (*meas.gps, np.asarray(r.gps_lever_arm, float))
     elif meas.ranges is not None:
-        rf = _range_fixes(meas, r, limit=None)
+        rf = range_fixes(meas, r, limit=None)
         if rf is not None:
             fixes = (rf[0], rf[1], rf[2], np.asarray(r.range_lever_arm, float))
     pose = dr.copy()
@@ -572,30 +572,47 @@ def run_batch(log: Log, schedule: Schedule = Schedule(), options: SmootherOption
     Sig = marginal_blocks(prob, pose, W, rb)
     if rb is not None:
         Sig, Sgg = Sig
+    range_bias = None
+    if rb is not None:
+        range_bias = {b.id: {"value": float(v), "sigma": float(np.sqrt(Sgg[i, i]))}
+                      for i, (b, v) in enumerate(zip(log.robot.beacons, rb))}
+    warnings = []
+    if not converged:
+        warnings.append(f"batch: stopped at its iteration cap ({options.max_iterations} Gauss-Newton "
+                        "iterations) before converging; the estimate may not be the optimum")
+    notes = [f"batch: {prob.kf.n} keyframes at {options.keyframe_hz:g} Hz, {iters} Gauss-Newton iterations, "
+             f"final cost {cost:.1f}; {start}", prob.init.note]
+    return smoother_estimate(prob, schedule, pose, W, Sig, "batch", wall0, notes, warnings, range_bias=range_bias)
+
+
+def smoother_estimate(prob: Problem, schedule: Schedule, pose: np.ndarray, W: np.ndarray, Sig: np.ndarray,
+                      method: str, wall0: float, notes: list[str], warnings=(), **extra) -> Estimate:
+    """A smoother's Estimate, built in one go from its keyframe solution.
+
+    pose (N, 3), W (N, 8): the keyframe states; Sig (N, 11, 11): their block
+    marginals as solved (the pinned scale combinations at nominal). Rows sit
+    at interval midpoints (``keyframe_rows``); the calibration block is the
+    last keyframe's, honest (``honest_blocks``) and as solved ("given"). Every
+    smoother reports the same counts (measurements used; rejected = the robust
+    loss's plus despike's) and the same warnings (the start's, the window's),
+    then its own ``warnings``. ``extra``: fields only some smoothers fill
+    (online, update_times, recoveries, range_bias). wall0: perf_counter at the
+    run's start."""
+    from dataclasses import replace
     given = Sig[-1][np.ix_(S.SCALE, S.SCALE)].copy()
     Sig = honest_blocks(prob, Sig)
-    est = keyframe_rows(prob, pose, W, Sig, "batch")
-    if rb is not None:
-        est.range_bias = {b.id: {"value": float(v), "sigma": float(np.sqrt(Sgg[i, i]))}
-                          for i, (b, v) in enumerate(zip(log.robot.beacons, rb))}
-    est.wall_time_s = time.perf_counter() - wall0
-    est.n_updates = n_measurements(prob)
-    est.t_switch = schedule.switch_time(prob.meas.t_start)
-    est.calibration_sigma = np.sqrt(np.diagonal(Sig[-1])[S.SCALE])
-    est.calibration_cov = Sig[-1][np.ix_(S.SCALE, S.SCALE)].copy()
-    est.calibration_cov_given = given
-    est.observability = prob.init.observability
-    est.warnings = list(prob.init.warnings) + window_warnings(prob, schedule)
-    est.notes = [f"batch: {prob.kf.n} keyframes at {options.keyframe_hz:g} Hz, {iters} Gauss-Newton iterations, "
-                 f"final cost {cost:.1f}; {start}", prob.init.note]
-    if not converged:
-        est.warnings.append(f"batch: stopped at its iteration cap ({options.max_iterations} Gauss-Newton "
-                            "iterations) before converging; the estimate may not be the optimum")
-    est.rejected, est.downweighted = robust_counts(prob, pose, W)
+    rows = keyframe_rows(prob, pose, W, Sig, method)
+    rejected, downweighted = robust_counts(prob, pose, W)
     for k, v in (prob.spikes or {}).items():          # added to what the robust loss rejected
-        est.rejected[k] = est.rejected.get(k, 0) + v
-    est.used = measurement_counts(prob)
-    return est
+        rejected[k] = rejected.get(k, 0) + v
+    return replace(rows, wall_time_s=time.perf_counter() - wall0, n_updates=n_measurements(prob),
+                   t_switch=schedule.switch_time(prob.meas.t_start),
+                   calibration_sigma=np.sqrt(np.diagonal(Sig[-1])[S.SCALE]),
+                   calibration_cov=Sig[-1][np.ix_(S.SCALE, S.SCALE)].copy(), calibration_cov_given=given,
+                   observability=prob.init.observability,
+                   warnings=list(prob.init.warnings) + window_warnings(prob, schedule) + list(warnings),
+                   notes=list(notes), rejected=rejected, downweighted=downweighted,
+                   used=measurement_counts(prob), **extra)
 
 
 def window_warnings(prob: Problem, schedule: Schedule) -> list[str]:

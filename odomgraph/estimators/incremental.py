@@ -37,10 +37,9 @@ from odomgraph.factors.motion import arc_at, propagate
 from odomgraph import state as St
 from odomgraph.checks import bounded
 from odomgraph.errors import EstimatorDivergedError
-from odomgraph.estimators.batch import (GraphOptions, build_problem, factor_arrays, n_measurements,
-                                        honest_blocks, keyframe_rows, marginal_blocks, measurement_counts, retract,
-                                        solve_window, window_warnings)
-from odomgraph.estimators.graph import NB, Problem, linearize, robust_counts
+from odomgraph.estimators.batch import (GraphOptions, build_problem, factor_arrays, marginal_blocks, retract,
+                                        smoother_estimate, solve_window)
+from odomgraph.estimators.graph import NB, Problem, linearize
 from odomgraph.result import Estimate
 from odomgraph.estimators.schedule import Schedule
 from odomgraph.io.log import Log
@@ -281,23 +280,16 @@ class _Runner:
                 self._trip(k, reason)
             if progress is not None and k % stride == 0:
                 progress(k, n)
-        est = self.finish()
-        est.wall_time_s = time.perf_counter() - wall0
-        est.n_updates = n_measurements(self.prob)
-        est.t_switch = self.schedule.switch_time(self.prob.meas.t_start)
-        est.update_times = self.update_times[1:]
-        est.recoveries = list(self.recoveries)
-        est.rejected, est.downweighted = robust_counts(self.prob, self.pose, self.W)
-        for k, v in (self.prob.spikes or {}).items():     # added to what the robust loss rejected
-            est.rejected[k] = est.rejected.get(k, 0) + v
-        est.used = measurement_counts(self.prob)
-        if self.graph.gated:
-            est.notes.append("gated at first linearisation (online): " + ", ".join(
-                f"{k} {v}" for k, v in sorted(self.graph.gated.items())))
-        est.observability = self.prob.init.observability
-        est.warnings = list(self.prob.init.warnings) + window_warnings(self.prob, self.schedule)
-        return est
+        return self.finish(wall0)
 
+    def _estimate(self, Sig: np.ndarray, wall0: float, notes: list[str], **extra) -> Estimate:
+        """The run's Estimate from its keyframe marginals Sig (N, 11, 11) (batch.smoother_estimate),
+        with what every incremental run adds: update times, recoveries, the first-linearisation gate."""
+        if self.graph.gated:
+            notes = notes + ["gated at first linearisation (online): " + ", ".join(
+                f"{k} {v}" for k, v in sorted(self.graph.gated.items()))]
+        return smoother_estimate(self.prob, self.schedule, self.pose, self.W, Sig, self.method, wall0, notes,
+                                 update_times=self.update_times[1:], recoveries=list(self.recoveries), **extra)
 
     def _watch(self, j: int) -> None:
         """Divergence watch on interval j's GPS fixes and ranges, at the estimate just
@@ -679,7 +671,7 @@ class ISAM2Runner(_Runner):
         Rinv = np.linalg.inv(bn.at(bn.size() - 1).R())
         return (pose[k0].copy(), W[k0].copy()), Rinv @ Rinv.T
 
-    def finish(self) -> Estimate:
+    def finish(self, wall0: float) -> Estimate:
         # Full back-substitution: the wildfire threshold (1e-3) would leave older
         # keyframes with scale-factor copies that are stale by up to 1e-3.
         values = self.isam.calculateBestEstimate()
@@ -708,18 +700,10 @@ class ISAM2Runner(_Runner):
             inf_f = np.linalg.inv(cov_f)
             fin, cov_f = self._smooth_segment(i, inf_f - np.linalg.inv(seg["cov"]), inf_f @ delta)
         Sig = marginal_blocks(self.prob, self.pose, self.W)
-        given = Sig[-1][8:11, 8:11].copy()
-        Sig = honest_blocks(self.prob, Sig)
-        est = keyframe_rows(self.prob, self.pose, self.W, Sig, "isam2")
-        est.calibration_sigma = np.sqrt(np.diagonal(Sig[-1])[St.SCALE])
-        est.calibration_cov = Sig[-1][8:11, 8:11].copy()
-        est.calibration_cov_given = given
         kf = self.prob.kf
         online = Estimate("isam2-online", kf.t[:-1] + 0.5 * kf.dt, self.online[1:], self.online_sigma[1:])
-        est.online = online
-        est.notes = [f"isam2: {kf.n} keyframes at {self.options.keyframe_hz:g} Hz, one ISAM2 update each, "
-                     f"{len(self.segments) + 1} segment(s)"]
-        return est
+        return self._estimate(Sig, wall0, [f"isam2: {kf.n} keyframes at {self.options.keyframe_hz:g} Hz, one "
+                                           f"ISAM2 update each, {len(self.segments) + 1} segment(s)"], online=online)
 
 
 class FixedLagRunner(_Runner):
@@ -807,22 +791,15 @@ class FixedLagRunner(_Runner):
             if not self.done[j]:
                 self._store(j, est)
 
-    def finish(self) -> Estimate:
+    def finish(self, wall0: float) -> Estimate:
         est = self.smoother.calculateEstimate()
         for j in np.nonzero(~self.done)[0]:
             self._harvest(int(j), est)
-        given = self.Sig[-1][8:11, 8:11].copy()
-        self.Sig = honest_blocks(self.prob, self.Sig)
-        est = keyframe_rows(self.prob, self.pose, self.W, self.Sig, "fixed-lag")
         # Window marginals are per variable: the cross-covariance of X, W and S
         # of one keyframe is not available, so pose sigma at the row time
         # ignores it (it is second order for the pose).
-        est.calibration_sigma = np.sqrt(np.diagonal(self.Sig[-1])[St.SCALE])
-        est.calibration_cov = self.Sig[-1][8:11, 8:11].copy()
-        est.calibration_cov_given = given
-        est.notes = [f"fixed-lag: {self.prob.kf.n} keyframes at {self.options.keyframe_hz:g} Hz, lag "
-                     f"{self.options.lag:g} s"]
-        return est
+        return self._estimate(self.Sig, wall0, [f"fixed-lag: {self.prob.kf.n} keyframes at "
+                                                f"{self.options.keyframe_hz:g} Hz, lag {self.options.lag:g} s"])
 
 
 def run_isam2(log: Log, schedule: Schedule = Schedule(), options: IncrementalOptions = IncrementalOptions(),

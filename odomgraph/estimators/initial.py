@@ -53,7 +53,7 @@ def _wheel_rates(robot: RobotConfig, meas: Measurements):
     return meas.wheel.t, v, w
 
 
-def _range_fixes(meas: Measurements, robot: RobotConfig, limit: int | None = 400):
+def range_fixes(meas: Measurements, robot: RobotConfig, limit: int | None = 400):
     """Multilateration fixes (t, xy, sigma, lever arm) of the ranging antenna
     from the first ``limit`` ranges (all with None), by Gauss-Newton."""
     t, bxy, rr = meas.ranges
@@ -133,7 +133,7 @@ def initial_state(robot: RobotConfig, meas: Measurements, pin: dict[str, str] | 
     if meas.gps is not None:
         fixes, source = (*meas.gps, robot.gps_lever_arm), "GPS"
     elif meas.ranges is not None:
-        fixes, source = _range_fixes(meas, robot), "multilateration of the first ranges"
+        fixes, source = range_fixes(meas, robot), "multilateration of the first ranges"
     if fixes is None:
         t0 = tw[0]
         msg = ("no absolute sensor and no [initial] pose in robot.toml: the start pose is taken as the origin, "

@@ -78,7 +78,7 @@ class Keyframes:
         return len(self.t)
 
 
-def _bin(t_kf: np.ndarray, t: np.ndarray):
+def bin_times(t_kf: np.ndarray, t: np.ndarray):
     """Interval index of each time (t_k <= t < t_{k+1}) and the mask of those inside."""
     k = np.searchsorted(t_kf, t, side="right") - 1
     inside = (k >= 0) & (k < len(t_kf) - 1)
@@ -155,7 +155,7 @@ def interval_means(t_kf: np.ndarray, ts: np.ndarray, z: np.ndarray, sigma, q, ca
         model = _bridge_variance(ts, a[rows], b[rows], ja[rows], jb[rows], last[rows])
         var[rows] = (np.sum(w**2, 1)[:, None] * sigma**2 + model[:, None] * q**2) / dt[:, None] ** 2
     sd = np.sqrt(var)
-    k, inside = _bin(t_kf, ts)
+    k, inside = bin_times(t_kf, ts)
     n = np.bincount(k[inside], minlength=nint)
     between = (ja >= 0) & (jb + 1 <= last)
     sd[~((n > 0) | between)] = np.inf
@@ -276,7 +276,7 @@ def build_keyframes(log: Log, t_start: float, keyframe_hz: float, causal: bool =
         if idx[-1] != len(w.t) - 1:
             idx = np.append(idx, len(w.t) - 1)
         t = w.t[idx]
-        k, inside = _bin(t, w.t)
+        k, inside = bin_times(t, w.t)
         ms = np.stack([w.v_left, w.v_right], -1)
         n = np.bincount(k[inside], minlength=len(t) - 1).astype(float)
         tot = np.stack([np.bincount(k[inside], ms[inside, j], minlength=len(t) - 1) for j in range(2)], -1)
@@ -320,7 +320,7 @@ def build_keyframes(log: Log, t_start: float, keyframe_hz: float, causal: bool =
     gxy = gvw = empty2
     if log.gps is not None and len(log.gps.t):
         g = log.gps
-        k, inside = _bin(t, g.t)
+        k, inside = bin_times(t, g.t)
         gk = k[inside]
         gvw = effective(gk, g.t[inside])
         gxy = np.stack([g.x, g.y], -1)[inside]
@@ -329,7 +329,7 @@ def build_keyframes(log: Log, t_start: float, keyframe_hz: float, causal: bool =
     rb = rvw = empty2
     if log.ranges is not None and len(log.ranges.t):
         rg = log.ranges
-        k, inside = _bin(t, rg.t)
+        k, inside = bin_times(t, rg.t)
         rk, rz = k[inside], rg.range[inside]
         rvw = effective(rk, rg.t[inside])
         rb = np.asarray([[bc.x, bc.y] for bc in r.beacons])[rg.beacon[inside]]
