@@ -8,7 +8,6 @@ line, so an hour-long log still reads in well under a second.
 from __future__ import annotations
 
 import codecs
-import io
 from pathlib import Path
 
 import numpy as np
@@ -79,6 +78,111 @@ def read_table(path: Path, required: tuple[str, ...], optional: tuple[str, ...] 
     """
     path = Path(path)
     text = read_text(path)
+    fast = _read_plain(path, text, required, optional, text_columns)
+    if fast is not None:
+        out = fast
+    else:
+        out = _read_rows(path, text, required, optional, text_columns)
+    if "t" in out and len(out["t"]) > 1:
+        dt = np.diff(out["t"])
+        wrong = dt < 0 if equal_times else dt <= 0
+        if wrong.any():
+            k = int(np.argmax(wrong)) + 1
+            what = "decreases" if equal_times else "does not increase"
+            raise LogFormatError(path, f"time {what} (t = {float(out['t'][k]):.9g} after "
+                                       f"{float(out['t'][k - 1]):.9g})", int(out["_line"][k]))
+    return out
+
+
+def _header(path: Path, text: str, required: tuple[str, ...]) -> tuple[list[str], int, int]:
+    """(column names, the header's line number, offset of the text after it)."""
+    pos, lineno = 0, 1
+    while pos <= len(text):
+        end = text.find("\n", pos)
+        stop = len(text) if end < 0 else end
+        s = text[pos:stop].strip()
+        if s and not s.startswith("#"):
+            header = [c.strip() for c in s.split(",")]
+            missing = [c for c in required if c not in header]
+            if missing:
+                raise LogFormatError(path, f"missing column(s) {', '.join(missing)} (header is "
+                                           f"'{shown(','.join(header), 80)}')", lineno)
+            if len(set(header)) != len(header):
+                raise LogFormatError(path, "duplicate column names in header", lineno)
+            return header, lineno, stop + 1
+        pos, lineno = stop + 1, lineno + 1
+    raise LogFormatError(path, "has no header row")
+
+
+def _read_plain(path: Path, text: str, required, optional, text_columns) -> dict[str, np.ndarray] | None:
+    """``read_table``'s result by one C-level parse (numpy.fromstring) when
+    the rows after the header are plain: numbers only, no comment or blank
+    line among them, every value finite, a text column absent. None for
+    anything else, and ``_read_rows`` then reads it row by row (and names the
+    line of whatever is wrong). About 10x faster, and the file is held about
+    twice (text and one copy), not as a list of fields per row."""
+    header, header_line, start = _header(path, text, required)
+    if any(c in header for c in text_columns):
+        return None
+    body = text[start:]
+    if "#" in body:
+        return None
+    if "\r" in body:
+        body = body.replace("\r", "")
+    lead = len(body) - len(body.lstrip())
+    first = header_line + 1 + body[:lead].count("\n")
+    body = body.strip()
+    ncol = len(header)
+    if not body:
+        a = np.zeros((0, ncol))
+    else:
+        if "\n\n" in body:
+            return None                    # blank lines: the slow path numbers the rows
+        # Every row must hold ncol fields: the total alone would let a long
+        # row and a short one make up for each other.
+        b = np.frombuffer(body.encode("utf-8"), np.uint8)
+        commas = np.flatnonzero(b == 44)
+        ends = np.concatenate([[-1], np.flatnonzero(b == 10), [len(b)]])
+        nrow = len(ends) - 1
+        del b
+        if not (np.diff(np.searchsorted(commas, ends)) == ncol - 1).all():
+            return None
+        del commas, ends
+        flat = body.replace("\n", ",")
+        try:
+            a = np.fromstring(flat, sep=",")
+        except ValueError:                 # a field that is no number, or an empty one
+            return None
+        del flat
+        if a.size != nrow * ncol or not np.isfinite(a).all():
+            return None
+        a = a.reshape(nrow, ncol)
+    lines = first + np.arange(len(a), dtype=np.int64)
+    # A row written twice is dropped (as _read_rows; equal numbers are an equal row).
+    dup = np.flatnonzero((a[1:] == a[:-1]).all(1)) + 1 if len(a) > 1 else np.zeros(0, np.int64)
+    if dup.size:
+        keep = np.ones(len(a), bool)
+        keep[dup] = False
+        a, lines = a[keep], lines[keep]
+    out: dict[str, np.ndarray] = {"_line": lines, "_duplicates": np.asarray(int(dup.size))}
+    for name in (*required, *optional):
+        if name in header:
+            out[name] = np.ascontiguousarray(a[:, header.index(name)])
+    tt = out.get("t")
+    if tt is not None and len(tt) and ORIGIN_ABOVE <= float(np.max(tt)) and float(np.max(np.abs(tt))) < ORIGIN_BELOW:
+        # Real-clock stamps: split from their text, exact (split_stamps).
+        j = header.index("t")
+        rows = body.split("\n")
+        col = [r.split(",", j + 1)[j].strip() for r in rows]
+        if dup.size:
+            col = [v for v, k in zip(col, keep) if k]
+        out["_t_sec"], out["_t_frac"] = split_stamps(col)
+    return out
+
+
+def _read_rows(path: Path, text: str, required, optional, text_columns) -> dict[str, np.ndarray]:
+    """``read_table`` row by row: every row split in Python (the general
+    path: comments, blank lines, text columns, and any error, named by line)."""
     header, header_line, rows, lines = None, 0, [], []
     for lineno, raw in text_lines(text):
         s = raw.strip()
@@ -139,14 +243,6 @@ def read_table(path: Path, required: tuple[str, ...], optional: tuple[str, ...] 
         # (beyond ORIGIN_BELOW a stamp is no seconds; the clock check says so)
         if name == "t" and len(arr) and ORIGIN_ABOVE <= float(np.max(arr)) and float(np.max(np.abs(arr))) < ORIGIN_BELOW:
             out["_t_sec"], out["_t_frac"] = split_stamps(col)
-    if "t" in out and len(out["t"]) > 1:
-        dt = np.diff(out["t"])
-        wrong = dt < 0 if equal_times else dt <= 0
-        if wrong.any():
-            k = int(np.argmax(wrong)) + 1
-            what = "decreases" if equal_times else "does not increase"
-            raise LogFormatError(path, f"time {what} (t = {float(out['t'][k]):.9g} after "
-                                       f"{float(out['t'][k - 1]):.9g})", lines[k])
     return out
 
 
@@ -198,23 +294,21 @@ def write_table(path: Path, columns: dict[str, np.ndarray], formats: dict[str, s
     formats = formats or {}
     names = list(columns)
     n = len(next(iter(columns.values()))) if columns else 0
+    # Each column becomes a list of strings, formatted and joined by C-level
+    # iteration (map, zip, str.join): no Python loop per row or per value.
+    # Floats without a format are written as repr (shortest round trip).
     cols = []
     for name in names:
         a = np.asarray(columns[name])
         fmt = formats.get(name)
         if a.dtype.kind in "US":
-            cols.append(a.astype(str))
+            cols.append(a.astype(str).tolist())
         elif fmt:
-            cols.append(np.char.mod(fmt, a))
+            cols.append(np.char.mod(fmt, a).tolist())
         elif a.dtype.kind in "iu":
-            cols.append(a.astype(str))
+            cols.append(list(map(str, a.tolist())))
         else:
-            cols.append(np.asarray([repr(float(x)) for x in a]) if n else np.zeros(0, dtype=str))
-    buf = io.StringIO()
-    if comment:
-        for line in comment.splitlines():
-            buf.write(f"# {line}\n")
-    buf.write(",".join(names) + "\n")
-    for i in range(n):
-        buf.write(",".join(c[i] for c in cols) + "\n")
-    Path(path).write_text(buf.getvalue(), encoding="utf-8")
+            cols.append(list(map(repr, a.astype(np.float64).tolist())))
+    head = "".join(f"# {ln}\n" for ln in comment.splitlines()) if comment else ""
+    body = "\n".join(map(",".join, zip(*cols))) + "\n" if n else ""
+    Path(path).write_text(head + ",".join(names) + "\n" + body, encoding="utf-8")
