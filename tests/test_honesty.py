@@ -247,3 +247,29 @@ def test_a_stuck_wheel_while_the_other_spins_in_place_is_slip_not_a_dead_encoder
     log = _zero_left(log, 40.3, 54.7)                 # a stuck wheel's encoder reads exactly 0
     est = estimate(log, "batch", Schedule(20.0))
     assert not any("encoder reads 0" in w for w in est.warnings), est.warnings
+
+
+@pytest.mark.parametrize("scenario,span,speed", [("paper", (12.0, 17.0), 0.15), ("yard", (6.0, 12.0), 0.3)])
+@pytest.mark.parametrize("seed", [41, 42])
+@pytest.mark.parametrize("method", ["ekf", "batch"])
+def test_one_wheel_slipping_inside_the_window_is_found_by_the_gyro(scenario, span, speed, seed, method):
+    """A probe's log: one wheel slipping 0.15 m/s during a pivot 12-17 s into
+    the 20 s calibration window. The distance the fixes travel hardly
+    changes, so only the gyro tells; before slipcheck.gyro_stretches every
+    estimator reported the track 9 % off at a 0.2 % sigma, status ok."""
+    from odomgraph.sim.scenarios import SlipEvent
+    base = paper(90.0) if scenario == "paper" else yard(90.0)
+    sc = base.with_(slips=(SlipEvent("left", *span, speed),) + tuple(s for s in base.slips if s.start > 25.0))
+    log = inject(sc, Faults(), seed)
+    est = estimate(log, method, Schedule(20.0))
+    ws = [w for w in warnings_of(est, log) if "slipped inside the calibration window" in w]
+    assert ws, warnings_of(est, log)
+    _honest(est, log)          # before: the track 9 % off at 0.2 % sigma (45 sigma)
+
+
+@pytest.mark.parametrize("scenario", ["paper", "yard"])
+def test_no_slip_inside_the_window_no_warning(scenario):
+    base = paper(60.0) if scenario == "paper" else yard(60.0)
+    log = inject(base, Faults(), 43)
+    est = estimate(log, "ekf", Schedule(20.0))
+    assert not [w for w in warnings_of(est, log) if "slipped inside the calibration window" in w]
