@@ -68,7 +68,9 @@ def _estimate_checked(log: Log, method: Method, schedule: Schedule, progress, op
     from odomgraph.estimators.measurements import repeat_notes
     est.warnings += [w for w in repeat_notes(log) if w not in est.warnings]
     from odomgraph.analysis.mounting import dead_encoder_warnings
-    suspect = _prior_warnings(est, log) + mounting_warnings(log) + dead_encoder_warnings(log)
+    from odomgraph.analysis.plausible import reversed_motion_warnings
+    suspect = (_prior_warnings(est, log) + mounting_warnings(log) + dead_encoder_warnings(log)
+               + reversed_motion_warnings(est, log.robot.track_width))
     if log.gps is not None and not est.time_offsets:
         from odomgraph.analysis.timing import gps_offset_warnings
         suspect += gps_offset_warnings(log, est)
