@@ -40,6 +40,11 @@ def test_the_snippet_is_valid_toml_and_keeps_nominal_what_is_not_determined():
     (_summary(sl=1.05), (1.03, 0.98, 1.04), "bad", "left ticks per metre is +20.0σ from the truth"),
     (_summary(status="degraded", status_reasons=["gps: 40 of 100 measurements rejected"]), None, "bad",
      "Not trustworthy: gps: 40 of 100 measurements rejected."),
+    # a probe's card: scale factors right, the path 1.3 m off at a few cm sigma
+    (_summary(errors={"coverage_3sigma": {"x": 0.6, "y": 0.59, "theta": 0.38}}), (1.03, 0.98, 1.04), "bad",
+     "Inconsistent: only 60% of x, 59% of y, 38% of theta inside ±3σ of the truth"),
+    (_summary(errors={"coverage_3sigma": {"x": 0.97, "y": 0.99, "theta": 1.0}}), (1.03, 0.98, 1.04), "good",
+     "Trustworthy"),
 ])
 def test_the_verdict(summary, truth, level, words):
     got_level, line = verdict(parameters(summary, ROBOT, truth), summary, [])

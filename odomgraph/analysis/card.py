@@ -76,6 +76,10 @@ def snippet(params: list[Parameter]) -> str:
     return "\n".join(lines)
 
 
+#: Share of the states inside +-3 sigma of the truth below which the card calls the estimate inconsistent.
+COVERAGE_MIN = 0.8
+
+
 def verdict(params: list[Parameter], summary: dict, failed: list[str]) -> tuple[str, str]:
     """(level "good" | "partial" | "bad", one line) for the card's estimate."""
     if summary.get("status") == "degraded":
@@ -83,6 +87,13 @@ def verdict(params: list[Parameter], summary: dict, failed: list[str]) -> tuple[
     off = [p for p in params if p.observable and p.z is not None and abs(p.z) > Z_LIMIT]
     if off:
         return "bad", "Inconsistent: " + ", ".join(f"{p.label} is {p.z:+.1f}σ from the truth" for p in off) + "."
+    # Against truth, the path must hold its sigma too: right scale factors on
+    # a path 1 m off at a 3 cm sigma are no result to trust (a probe's card).
+    cov = (summary.get("errors") or {}).get("coverage_3sigma") or {}
+    low = {k: v for k, v in cov.items() if k in ("x", "y", "theta") and v is not None and v < COVERAGE_MIN}
+    if low:
+        return "bad", ("Inconsistent: only " + ", ".join(f"{v:.0%} of {k}" for k, v in low.items())
+                       + f" inside ±3σ of the truth (expected about 99 %){_counts(summary)}.")
     unknown = [p.label for p in params if not p.observable]
     counts = _counts(summary)
     if unknown:
