@@ -65,8 +65,8 @@ def _estimate_checked(log: Log, method: Method, schedule: Schedule, progress, op
         if found:
             raise EstimatorDivergedError(f"{exc}; the log shows why: {'; '.join(found)}") from exc
         raise
-    from odomgraph.estimators.measurements import repeat_notes
-    est.warnings += [w for w in repeat_notes(log) if w not in est.warnings]
+    from odomgraph.estimators.measurements import repeat_notes, saturation_notes
+    est.warnings += [w for w in repeat_notes(log) + saturation_notes(log) if w not in est.warnings]
     from odomgraph.analysis.mounting import dead_encoder_warnings
     from odomgraph.analysis.plausible import reversed_motion_warnings
     suspect = (_prior_warnings(est, log) + mounting_warnings(log) + dead_encoder_warnings(log)

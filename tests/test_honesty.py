@@ -313,3 +313,60 @@ def test_slip_and_driving_backwards_are_not_taken_for_a_mirrored_heading(scenari
         log = inject(sc, Faults(), seed)
         est = estimate(log, "ekf", Schedule(20.0))
         assert not any("half a turn off" in w for w in est.warnings), est.warnings
+
+
+@pytest.mark.parametrize("scenario,clip,seed", [("paper", 0.8, 46), ("paper", 1.0, 47), ("yard", 0.5, 48)])
+@pytest.mark.parametrize("method", ["ekf", "batch"])
+def test_a_saturated_gyro_is_said_and_its_rail_left_out(scenario, clip, seed, method):
+    """A probe's gyro clipped at 0.8 rad/s on 1.2 rad/s pivots: the EKF
+    stopped ("NIS of gps"), batch put the track 26 % off and blamed the
+    lever arm. The rail's samples say only "at least this fast"."""
+    base = paper(90.0) if scenario == "paper" else yard(90.0)
+    log = inject(base, Faults(), seed)
+    g = log.gyro
+    assert np.abs(g.omega).max() > 1.2 * clip            # the scenario turns faster than the rail
+    log = log.with_(gyro=replace(g, omega=np.clip(g.omega, -clip, clip)))
+    est = estimate(log, method, Schedule(20.0))
+    ws = [w for w in warnings_of(est, log) if "the gyro's range" in w]
+    assert ws and f"+-{clip:g} rad/s" in ws[0], warnings_of(est, log)
+    _honest(est, log)
+
+
+def test_a_quantised_gyro_holding_its_top_value_is_not_a_rail():
+    """Equal readings at the top rate are a rail only where the wheels turn faster."""
+    log = inject(paper(60.0), Faults(), 49)
+    g = log.gyro
+    top = np.abs(g.omega).max()
+    w = g.omega.copy()
+    k = int(np.argmax(np.abs(w)))
+    w[k:k + 5] = w[k]                               # a steady spin at the top value, as the wheels say
+    from odomgraph.estimators.measurements import saturated, wheel_yaw_rate
+    lg = log.with_(gyro=replace(g, omega=w))
+    rate = wheel_yaw_rate(lg, g.t)
+    assert abs(rate[k] - w[k]) < 0.2 * top
+    assert not saturated(lg.gyro, rate).any()
+    assert saturated(lg.gyro, None)[k:k + 5].all()   # without the wheels' word it would be
+
+
+@pytest.mark.parametrize("seed", [50, 51])
+def test_turning_on_the_spot_is_no_wiring_or_lever_arm_mistake(seed):
+    """A probe's pivot-only log: the antenna sweeps its lever arm round a
+    still centre. It was read as "one encoder counts backwards" (the wheels'
+    centre against the fixes' antenna) and as a lever arm 0.54 m off at a
+    0.01 m sigma (its direction trades off against the start heading)."""
+    from odomgraph.sim.scenarios import SlipEvent
+    sc = paper(80.0).with_(prologue=(Segment(1.0, 0.0, 0.0), Segment(8.0, 0.0, 1.0), Segment(8.0, 0.0, -1.0)),
+                           loop=(Segment(6.0, 0.0, 1.5), Segment(6.0, 0.0, -0.7)),
+                           slips=(SlipEvent("left", 40.0, 45.0, 0.3),))
+    log = inject(sc, Faults(), seed)
+    est = estimate(log, "ekf", Schedule(20.0))
+    said = " ".join(warnings_of(est, log))
+    assert "counts backwards" not in said and "lever arm looks off" not in said, said
+    _honest(est, log)
+
+
+@pytest.mark.parametrize("seconds", [3.0, 5.0])
+def test_a_log_that_barely_turns_says_nothing_about_the_gyro_axis(seconds):
+    log = inject(paper(seconds), Faults(), 52)
+    est = estimate(log, "ekf", Schedule(20.0))
+    assert not any("another axis" in w for w in warnings_of(est, log)), warnings_of(est, log)

@@ -22,6 +22,10 @@ import numpy as np
 MIN_TURN = 0.05
 #: The fewest gyro samples judged.
 MIN_SAMPLES = 30
+#: The gyro is judged on means over BIN seconds, and only when the wheels
+#: turn through MIN_TURNED radians in all.
+BIN = 0.5
+MIN_TURNED = 1.5
 #: Below this correlation with the wheels' yaw rate the gyro does not measure yaw.
 MIN_CORRELATION = 0.3
 #: Below minus this correlation, the fixes turn the other way from the wheels.
@@ -96,6 +100,14 @@ def _fixes_still(log, t0: float, t1: float, wheel_travel: float) -> bool:
     return spread < max(0.25 * wheel_travel, 6.0 * sig)
 
 
+def _bin_means(t: np.ndarray, x: np.ndarray, width: float) -> np.ndarray:
+    """Means of x over consecutive ``width``-second bins of t (empty bins left out)."""
+    k = np.floor((t - t[0]) / width).astype(np.int64)
+    n = np.bincount(k)
+    s = np.bincount(k, weights=x)
+    return s[n > 0] / n[n > 0]
+
+
 def mounting_warnings(log) -> list[str]:
     """One line per mounting or wiring mistake that the log shows."""
     from odomgraph.analysis.holdout import wheel_yaw_rate_at_gyro
@@ -103,8 +115,13 @@ def mounting_warnings(log) -> list[str]:
     gyro_c, slope = None, None
     rate = wheel_yaw_rate_at_gyro(log)
     if rate is not None:
-        _, g, w = rate
-        if len(g) >= MIN_SAMPLES and np.std(w) >= MIN_TURN and np.std(g) > 0:
+        t, g, w = rate
+        # Judged on half-second means: sample by sample, tick quantisation
+        # makes the wheels' rate noise, and a log that barely turns (3 s of
+        # straight driving, a probe's) then "correlates" 0.15 with the gyro.
+        g, w = _bin_means(t, g, BIN), _bin_means(t, w, BIN)
+        turned = float(np.sum(np.abs(w)) * BIN)
+        if len(g) >= MIN_SAMPLES // 3 and np.std(w) >= MIN_TURN and turned >= MIN_TURNED and np.std(g) > 0:
             gyro_c = float(np.corrcoef(g, w)[0, 1])
             # The ratio of the fast turns, gyro to wheels: slip looks like
             # turning to the wheels and not to the gyro, and pulls a
@@ -198,8 +215,15 @@ def fix_speed_correlation(log, step: float = 2.0, max_lag: float | None = None):
     fix_speed = (np.hypot(np.diff(x), np.diff(y)) / step)[covered]
     max_lag = MAX_LAG if max_lag is None else max_lag
 
+    # The antenna on the wheels' path: on a pivot the robot's centre stands
+    # while the antenna sweeps its lever arm round (a probe's pivot-only log
+    # read as "one encoder counts backwards").
+    lx, ly = log.robot.gps_lever_arm
+    c, s_ = np.cos(dr[:, 2]), np.sin(dr[:, 2])
+    ax, ay = dr[:, 0] + c * lx - s_ * ly, dr[:, 1] + s_ * lx + c * ly
+
     def wheel_speed(lag):
-        px, py = np.interp(grid - lag, t_dr, dr[:, 0]), np.interp(grid - lag, t_dr, dr[:, 1])
+        px, py = np.interp(grid - lag, t_dr, ax), np.interp(grid - lag, t_dr, ay)
         return (np.hypot(np.diff(px), np.diff(py)) / step)[covered]
     w0 = wheel_speed(0.0)
     if fix_speed.size < 10 or np.std(fix_speed) < 4.0 * sig / step or np.std(w0) == 0:

@@ -244,6 +244,8 @@ class JointFit:
     t0: float
     t1: float
     n_windows: int
+    travel: float = float("inf")
+    """How far the robot's centre moved [m] over the windows fitted."""
 
     @property
     def sigma(self) -> float:
@@ -258,12 +260,21 @@ class JointFit:
         return Offset(self.delta, self.sigma, self.t0, self.t1)
 
     def lever_off(self, axis: int) -> bool:
-        """The lever arm's error along robot axis 0 (x) or 1 (y) is significant."""
+        """The lever arm's error along robot axis 0 (x) or 1 (y) is significant.
+        Only where the robot's centre travelled MIN_LEVER_TRAVEL: turning on
+        the spot, the antenna circles the centre, and a lever arm turned by
+        any angle fits as well with the start heading turned back (the fit
+        then reads the wheels' small scale-error drift as a lever arm: a
+        probe's pivot-only log, "off by 0.54 m, sigma 0.01 m")."""
+        if self.travel < MIN_LEVER_TRAVEL:
+            return False
         return abs(self.lever[axis]) > max(N_SIGMA * self.lever_sigma[axis], MIN_LEVER)
 
 
-#: A lever-arm error is reported when it is N_SIGMA from 0 and at least this [m].
+#: A lever-arm error is reported when it is N_SIGMA from 0 and at least this [m],
+#: and the robot's centre travelled at least MIN_LEVER_TRAVEL [m] over the fit.
 MIN_LEVER = 0.05
+MIN_LEVER_TRAVEL = 2.0
 #: The joint fit's prior information on (offset [s], lever x, lever y [m]):
 #: sigmas of 10 s and 10 m, so that a log that cannot tell one of them
 #: (a straight line does not see the lever arm) reports it as undetermined.
@@ -337,8 +348,12 @@ def joint_fit(log, scales=(1.0, 1.0, 1.0), delta0: float = 0.0, skip=(),
     ad = np.concatenate([x[1][:, 0] for x in parts])
     ax = np.concatenate([x[1][:, 1] for x in parts])
     along = float(ad @ ax / max(ax @ ax, 1e-12))
+    travel = 0.0
+    for a in chosen:
+        k = (path.t >= a) & (path.t <= a + WINDOW)
+        travel += float(np.sum(np.hypot(*np.diff(path.pose[k, 0:2], axis=0).T))) if k.sum() > 1 else 0.0
     return JointFit(float(th[0]), (float(th[1]), float(th[2])), cov, along,
-                    parts[0][0], parts[-1][0] + WINDOW, m)
+                    parts[0][0], parts[-1][0] + WINDOW, m, travel)
 
 
 def combine(parts: list[Offset]) -> Offset | None:

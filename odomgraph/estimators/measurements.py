@@ -264,14 +264,80 @@ def repeat_notes(log: Log) -> list[str]:
             "its last fix): each position was read once, at its first stamp"]
 
 
+#: A gyro rail: at least this many samples in a row at the largest |rate| of
+#: the log (to within RAIL_TOL of it), beyond RAIL_MIN rad/s.
+RAIL_RUN = 3
+RAIL_TOL = 1e-6
+RAIL_MIN = 0.3
+#: ...where the wheels turn faster than this multiple of the rail.
+RAIL_WHEELS = 1.05
+
+
+def saturated(gyro, wheel_rate: np.ndarray | None = None) -> np.ndarray:
+    """(K,) mask of gyro samples at the sensor's rail: a saturated gyro
+    clips every faster turn to its range, and those samples say only "at
+    least this fast". Read as rates they tell the estimators the robot turns
+    slower than its wheels say (a probe's gyro clipped at 0.8 rad/s on
+    1.2 rad/s pivots: the EKF stopped, batch put the track 26 % off and
+    blamed the lever arm). A rail is a value the log's largest |rate|
+    repeats exactly RAIL_RUN times in a row; real rates are never that still
+    at speed, and the wheels must turn faster there (a quantised gyro
+    holding its top value through a steady spin is not clipped).
+    ``wheel_rate``: the wheels' yaw rate [rad/s] at the gyro's times (nominal
+    parameters), or None to skip that test."""
+    w = np.asarray(gyro.omega, float)
+    if len(w) < RAIL_RUN:
+        return np.zeros(len(w), bool)
+    top = float(np.max(np.abs(w)))
+    if top < RAIL_MIN:
+        return np.zeros(len(w), bool)
+    at = np.abs(np.abs(w) - top) <= RAIL_TOL * top
+    # runs of RAIL_RUN or more
+    edges = np.flatnonzero(np.diff(np.concatenate([[0], at.astype(np.int8), [0]])))
+    mask = np.zeros(len(w), bool)
+    for a, b in zip(edges[::2], edges[1::2]):
+        if b - a >= RAIL_RUN and (wheel_rate is None or np.median(np.abs(wheel_rate[a:b])) > RAIL_WHEELS * top):
+            mask[a:b] = True
+    return mask
+
+
+def wheel_yaw_rate(log: Log, t: np.ndarray) -> np.ndarray | None:
+    """The wheels' yaw rate [rad/s] at times t, nominal parameters, from the
+    raw encoder rows (interval means at their midpoints) or wheel speeds."""
+    r = log.robot
+    if log.encoders is not None and len(log.encoders.t) > 1:
+        e = log.encoders
+        dt = np.diff(e.t)
+        w = (e.ticks_right[1:] / r.ticks_per_meter_right - e.ticks_left[1:] / r.ticks_per_meter_left) / (
+            dt * r.track_width)
+        return np.interp(t, 0.5 * (e.t[1:] + e.t[:-1]), w)
+    if log.wheel_speeds is not None and len(log.wheel_speeds.t) > 1:
+        ws = log.wheel_speeds
+        return np.interp(t, ws.t, (ws.v_right - ws.v_left) / r.track_width)
+    return None
+
+
+def saturation_notes(log: Log) -> list[str]:
+    """One line when gyro.csv holds samples at a rail (``saturated``), [] otherwise."""
+    if log.gyro is None or len(log.gyro.t) < RAIL_RUN:
+        return []
+    m = saturated(log.gyro, wheel_yaw_rate(log, log.gyro.t))
+    if not m.any():
+        return []
+    top = float(np.max(np.abs(log.gyro.omega)))
+    return [f"gyro: {int(m.sum())} of {len(m)} samples sit at +-{top:.4g} rad/s, the gyro's range (it saturates "
+            "on faster turns): they were left out, the wheels carry the heading there"]
+
+
 def clean(log: Log) -> tuple[Log, dict[str, int]]:
     """The log as every estimator reads it: GPS fixes that repeat the one
     before dropped (``repeated_fixes``; the first copy is kept, its stamp
-    nearest the fix), GPS stamps moved back by the configured
+    nearest the fix), gyro samples at the gyro's rail dropped
+    (``saturated``), GPS stamps moved back by the configured
     ``[gps] time_offset`` (a fix stamped t was taken at t - offset), then
     ``despike``. Returns it with the spikes taken out per sensor (the
-    repeated fixes are not rejections: ``repeat_notes`` says them, and
-    pipeline.estimate makes that a warning)."""
+    repeated fixes and the rail are not rejections: ``repeat_notes`` and
+    ``saturation_notes`` say them, and pipeline.estimate makes those warnings)."""
     from dataclasses import replace
     if log.gps is not None and len(log.gps.t) > 1:
         rep = repeated_fixes(log.gps)
@@ -280,6 +346,11 @@ def clean(log: Log) -> tuple[Log, dict[str, int]]:
             keep = ~rep
             log = log.with_(gps=replace(g, t=g.t[keep], x=g.x[keep], y=g.y[keep],
                                         sigma=None if g.sigma is None else g.sigma[keep]))
+    if log.gyro is not None and len(log.gyro.t) >= RAIL_RUN:
+        sat = saturated(log.gyro, wheel_yaw_rate(log, log.gyro.t))
+        if sat.any():
+            g = log.gyro
+            log = log.with_(gyro=replace(g, t=g.t[~sat], omega=g.omega[~sat]))
     off = log.robot.gps_time_offset
     if off and log.gps is not None:
         log = log.with_(gps=replace(log.gps, t=log.gps.t - off))
