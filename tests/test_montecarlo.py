@@ -39,6 +39,31 @@ def test_vectorised_ekf_equals_one_run_at_a_time(config, x, y, hold, gate):
         assert b.notes == a.notes and b.n_updates == a.n_updates
 
 
+@pytest.mark.parametrize("span", [(25.0, 27.0), (22.0, 35.0)])
+def test_vectorised_ekf_equals_one_run_at_a_time_through_gps_jumps(span):
+    """A multipath burst (3.6 m, in some runs only) is held out per run as in
+    EKF.run: the same rejections, the same rows."""
+    from dataclasses import replace
+    sc = study_scenario(1, 0.1, 0.02, duration=40.0)
+    logs = [simulate(sc, s, timing_seed=5) for s in range(4)]
+    for j in (1, 2):
+        g = logs[j].gps
+        on = (g.t >= span[0]) & (g.t <= span[1] + j)
+        logs[j] = logs[j].with_(gps=replace(g, x=np.where(on, g.x + 3.0, g.x), y=np.where(on, g.y - 2.0, g.y)))
+    sch, opt = Schedule(20.0), EKFOptions()
+    many = run_ekf_many(logs, sch, opt)
+    for j, (log, b) in enumerate(zip(logs, many)):
+        a = run_ekf(log, sch, opt)
+        np.testing.assert_allclose(b.mean, a.mean, rtol=0, atol=1e-9)
+        np.testing.assert_allclose(b.sigma, a.sigma, rtol=0, atol=1e-9)
+        assert b.rejected == a.rejected and b.recoveries == a.recoveries
+        if j in (1, 2):    # the burst is rejected whole, and the path stays within its sigma
+            n_burst = int(np.sum((log.gps.t >= span[0]) & (log.gps.t <= span[1] + j)))
+            assert a.rejected.get("gps", 0) >= n_burst - 2
+            err = np.hypot(a.mean[:, 0] - log.truth.at("x", a.t), a.mean[:, 1] - log.truth.at("y", a.t))
+            assert np.all(err <= 4.0 * np.hypot(a.sigma[:, 0], a.sigma[:, 1]) + 0.01)
+
+
 def test_a_diverging_run_is_reported_and_the_others_go_on():
     sc = study_scenario(1, 0.1, 0.02, duration=40.0)
     logs = [simulate(sc, s, timing_seed=3) for s in range(3)]

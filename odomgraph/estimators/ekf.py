@@ -45,6 +45,12 @@ from odomgraph.estimators.sensors import (DOF, ENC_IDX, GATED, GPS, GYRO, GYRO_I
 _I = np.eye(S.N)
 
 
+#: Defaults of EKFOptions.jump_speed [m/s] and jump_hold [s]; the incremental
+#: smoothers' first-linearisation gate holds jumps out by the same rule.
+JUMP_SPEED = 3.0
+JUMP_HOLD = 30.0
+
+
 @dataclass(frozen=True)
 class EKFOptions:
     gate: float | None = bounded(None, gt=0, optional=True)
@@ -62,6 +68,15 @@ class EKFOptions:
     lock the filter out: the covariance that sensor sees is widened by the
     rejected innovations, so that the next measurement can pull the state
     back (a recovery, counted and reported)."""
+    jump_speed: float = bounded(JUMP_SPEED, gt=0, infinite=True)
+    """A GPS fix or range whose innovation steps from the one before faster
+    than this [m/s] (plus the noise of both) has jumped, not the state: no
+    robot's position error changes that fast. Its sensor is held out
+    (``jump_hold``) instead of re-acquired, until it comes back."""
+    jump_hold: float = bounded(JUMP_HOLD, gt=0, infinite=True)
+    """How long [s] a jumped sensor is held out before the filter re-acquires
+    it anyway (a datum that really moved). A probe's 2 s multipath burst of
+    3.6 m at 20 Hz was followed, then its end rejected, and the filter stopped."""
     max_scale_error: float = bounded(5.0, gt=0, infinite=True)
     """|scale - 1| beyond which the filter is declared diverged (a scale factor
     must also stay above 0.05). Real nominal parameters can be off by 2x (the
@@ -133,6 +148,17 @@ def gate_reference(history: list) -> np.ndarray | None:
     if len(history) < 3:
         return None
     return np.median(np.asarray(history), 0)
+
+
+def jumped(y: np.ndarray, y_prev: np.ndarray, R: np.ndarray, dt: float, speed: float, gate: float) -> np.ndarray:
+    """Whether innovations y (..., m) stepped from the sensor's previous ones
+    y_prev by more than the state can move in dt seconds at ``speed`` [m/s],
+    plus the noise R (..., m, m) of both: the NIS of the step against gate.
+    (Batched over leading axes, for ekf_many.)"""
+    d = y - y_prev
+    m = d.shape[-1]
+    Sj = 2.0 * R + (speed * dt) ** 2 * np.eye(m)
+    return np.einsum("...i,...ij,...j->...", d, np.linalg.inv(Sj), d) > gate
 
 
 def reacquire_widening(code: int, Y: np.ndarray) -> tuple[slice, np.ndarray]:
@@ -300,6 +326,9 @@ class EKF:
         n_seen = [0] * len(DOF)
         run = {c: [] for c in GATED}         # innovations of the current run of rejections
         hist: dict[tuple, list] = {}          # (sensor, beacon) -> its last GATE_HISTORY innovations
+        jump: dict[tuple, tuple] = {}         # (sensor, beacon) -> (t, innovation before) of a jump held out
+        last_t: dict[tuple, float] = {}       # (sensor, beacon) -> time of its previous measurement
+        held_t: dict[str, list] = {}          # sensor -> times of the measurements held out as a jump
         recoveries: list[str] = []
         stride = max(1, len(t_ev) // 200)
         obs = self.init.observability
@@ -342,13 +371,17 @@ class EKF:
                 h, H = gps.antenna_position(x[0], x[1], x[2], lever_gps)              # eq. 8-9
                 sg = m.gps[2][i]
                 key = (GPS, 0)
-                nis[GPS].append((t, self.update(m.gps[1][i], h, H, POSE_IDX, np.eye(2) * sg * sg,
-                                                gates[GPS], gate_reference(hist.setdefault(key, [])))))
+                R_k = np.eye(2) * sg * sg
+                # a sensor held out after a jump gets no rescue from its recent innovations (the jump's)
+                ref = None if key in jump else gate_reference(hist.setdefault(key, []))
+                nis[GPS].append((t, self.update(m.gps[1][i], h, H, POSE_IDX, R_k, gates[GPS], ref)))
             elif code == RANGE:
                 h, H = ranging.beacon_range(x[0], x[1], x[2], m.ranges[1][i], lever_rng)   # eq. 12-16
                 key = (RANGE, m.ranges_id[i])
+                R_k = R_rng
+                ref = None if key in jump else gate_reference(hist.setdefault(key, []))
                 nis[RANGE].append((t, self.update(m.ranges[2][i:i + 1], h, H[:, :3], POSE_IDX, R_rng,
-                                                  gates[RANGE], gate_reference(hist.setdefault(key, [])))))
+                                                  gates[RANGE], ref)))
             else:
                 h, H = velocity.body_velocity(x[3], x[4])                             # sec. VI-B
                 key = (VEL, 0)
@@ -357,9 +390,26 @@ class EKF:
             nis_k = nis[code][-1][1]
             if code in run:
                 h_k = hist[key]
-                h_k.append(np.atleast_1d(self.last_y).copy())
+                y_now = np.atleast_1d(self.last_y).copy()
+                t_prev, last_t[key] = last_t.get(key), t
+                if (nis_k < 0 and code != VEL and key not in jump and h_k
+                        and jumped(y_now, h_k[-1], R_k, t - t_prev, opt.jump_speed, gates[code])):
+                    jump[key] = (t, h_k[-1].copy())
+                held = key in jump
+                h_k.append(jump[key][1].copy() if held and nis_k < 0 else y_now)
                 if len(h_k) > GATE_HISTORY:
                     del h_k[0]
+                if held and nis_k < 0:
+                    held_t.setdefault(SENSOR_NAMES[code], []).append(t)
+                    # Held out after a jump: no re-acquisition, until the hold ends.
+                    if t - jump[key][0] > opt.jump_hold:
+                        recoveries.append(f"t={t:.2f} s: {SENSOR_NAMES[code]} jumped at t={jump[key][0]:.2f} s "
+                                          f"and did not come back in {opt.jump_hold:g} s; re-acquiring it")
+                        del jump[key]
+                    n_up += 1
+                    continue
+                if held:
+                    del jump[key]        # back where the state expects it: the jump is over
                 # The gate never locks the filter out: a run of rejections widens
                 # what the sensor sees, and the next measurement re-acquires it.
                 if nis_k < 0:
@@ -404,6 +454,7 @@ class EKF:
                             n_up, t_switch, switch_sigma, sch.hold, self.P[SCALE_IDX, SCALE_IDX].copy(),
                             self.init)
         est.recoveries = recoveries
+        est.held_out = {k: np.asarray(v) for k, v in held_t.items()}
         est.warnings += window_warn
         for k, v in m.spikes.items():
             est.rejected[k] = est.rejected.get(k, 0) + v

@@ -22,8 +22,8 @@ from odomgraph.factors._math import wrap_angle
 from odomgraph.factors.motion import propagate
 from odomgraph import state as S
 from odomgraph.errors import EstimatorDivergedError
-from odomgraph.estimators.ekf import (GATE_HISTORY, MAX_RECOVERIES, EKFOptions, gate_thresholds, make_estimate,
-                                      reacquire_widening, watch_widening)
+from odomgraph.estimators.ekf import (GATE_HISTORY, MAX_RECOVERIES, EKFOptions, gate_thresholds, jumped,
+                                      make_estimate, reacquire_widening, watch_widening)
 from odomgraph.estimators.sensors import (DOF, ENC_IDX, GATED, GPS, GYRO, GYRO_IDX, POSE_IDX, RANGE, SCALE_IDX,
                                          SENSOR_NAMES, SLIP_IDX, VEL, VEL_IDX, WHEEL, event_stream)
 from odomgraph.estimators.initial import initial_state
@@ -145,14 +145,19 @@ def run_ekf_many(logs: list[Log], schedule: Schedule = Schedule(), options: EKFO
     last_y = None
 
     hist: dict[tuple, list] = {}                 # (sensor, beacon) -> list of (N, m) innovations, newest last
+    jump_on: dict[tuple, np.ndarray] = {}        # (sensor, beacon) -> (N,) held out after a jump (EKF.run)
+    jump_t0: dict[tuple, np.ndarray] = {}
+    jump_y: dict[tuple, np.ndarray] = {}         # (N, m) the innovation before the jump
+    last_t: dict[tuple, float] = {}
 
     def reference(key):
         """(N, m) median of the recent innovations (ekf.gate_reference), or None."""
         hk = hist.get(key, [])
         return None if len(hk) < 3 else np.median(np.stack(hk), 0)
 
-    def update(z, h, H, idx, R, gate=None, ref=None):
-        """Batched Kalman update (see EKF.update); returns (N,) NIS, negative where gated."""
+    def update(z, h, H, idx, R, gate=None, ref=None, no_ref=None):
+        """Batched Kalman update (see EKF.update); returns (N,) NIS, negative where gated.
+        no_ref: (N,) runs that get no rescue from ``ref`` (held out after a jump)."""
         nonlocal x, P, last_y
         Ht = np.swapaxes(H, 1, 2)
         PHt = P[:, :, idx] @ Ht
@@ -166,7 +171,8 @@ def run_ekf_many(logs: list[Log], schedule: Schedule = Schedule(), options: EKFO
             rej = nis > gate
             if ref is not None:
                 d = y - ref
-                rej &= np.einsum("ni,nij,nj->n", d, Sinv, d) > gate
+                far = np.einsum("ni,nij,nj->n", d, Sinv, d) > gate
+                rej &= far if no_ref is None else (far | no_ref)
             K[rej] = 0.0
             nis = np.where(rej, -nis, nis)
         if holding:
@@ -233,11 +239,14 @@ def run_ekf_many(logs: list[Log], schedule: Schedule = Schedule(), options: EKFO
                 h, H = gps.antenna_position(x[:, 0], x[:, 1], x[:, 2], lever_gps)    # eq. 8-9
                 Rg = np.eye(2) * gps_s2[:, i, None, None]
                 key = (GPS, 0)
-                nis = update(gps_z[:, i], h, H, POSE_IDX, Rg, gates[GPS], reference(key))
+                R_k = Rg
+                nis = update(gps_z[:, i], h, H, POSE_IDX, Rg, gates[GPS], reference(key), jump_on.get(key))
             elif code == RANGE:
                 h, H = ranging.beacon_range(x[:, 0], x[:, 1], x[:, 2], rng_b[i], lever_rng)  # eq. 12-16
                 key = (RANGE, int(m0.ranges_id[i]))
-                nis = update(rng_z[:, i], h, H[:, :, :3], POSE_IDX, R_rng, gates[RANGE], reference(key))
+                R_k = np.broadcast_to(R_rng, (n, 1, 1))
+                nis = update(rng_z[:, i], h, H[:, :, :3], POSE_IDX, R_rng, gates[RANGE], reference(key),
+                             jump_on.get(key))
             else:
                 h, H = velocity.body_velocity(x[:, 3], x[:, 4])                      # sec. VI-B
                 key = (VEL, 0)
@@ -247,15 +256,32 @@ def run_ekf_many(logs: list[Log], schedule: Schedule = Schedule(), options: EKFO
             rejected = nis < 0
             if code in run_len:
                 hk = hist.setdefault(key, [])
-                hk.append(last_y.copy())
+                # Jumps held out, per run, as in EKF.run.
+                t_prev, last_t[key] = last_t.get(key), t
+                on = jump_on.setdefault(key, np.zeros(n, bool))
+                if code != VEL and hk and rejected.any():
+                    onset = rejected & ~on & jumped(last_y, hk[-1], R_k, t - t_prev, opt.jump_speed, gates[code])
+                    if onset.any():
+                        jump_t0.setdefault(key, np.zeros(n))[onset] = t
+                        jump_y.setdefault(key, np.zeros_like(last_y))[onset] = hk[-1][onset]
+                        on |= onset
+                held = on & rejected
+                hk.append(np.where(held[:, None], jump_y[key], last_y) if held.any() else last_y.copy())
                 if len(hk) > GATE_HISTORY:
                     del hk[0]
+                if held.any():
+                    for j in np.flatnonzero(held & (t - jump_t0[key] > opt.jump_hold)):
+                        recoveries[j].append(f"t={t:.2f} s: {SENSOR_NAMES[code]} jumped at t={jump_t0[key][j]:.2f} s "
+                                             f"and did not come back in {opt.jump_hold:g} s; re-acquiring it")
+                        on[j] = False
+                on &= rejected           # back where the state expects it: the jump is over
                 # Re-acquisition after a run of rejections, per run, as in EKF.run.
                 rl = run_len[code]
                 if code not in run:
                     run[code] = np.zeros((n, opt.reacquire_after, last_y.shape[1]))
-                run[code][rejected, rl[rejected]] = last_y[rejected]
-                rl[:] = np.where(rejected, rl + 1, 0)
+                counted = rejected & ~held
+                run[code][counted, rl[counted]] = last_y[counted]
+                rl[:] = np.where(counted, rl + 1, np.where(held, rl, 0))
                 for j in np.flatnonzero(rl >= opt.reacquire_after):
                     blk, add = reacquire_widening(code, run[code][j])
                     P[j, blk, blk] += np.diag(add)

@@ -37,8 +37,8 @@ from odomgraph.factors.motion import arc_at, propagate
 from odomgraph import state as St
 from odomgraph.checks import bounded
 from odomgraph.errors import EstimatorDivergedError
-from odomgraph.estimators.batch import (GraphOptions, build_problem, factor_arrays, marginal_blocks, retract,
-                                        smoother_estimate, solve_window)
+from odomgraph.estimators.batch import (HELD_SIGMA, GraphOptions, build_problem, factor_arrays, marginal_blocks,
+                                        retract, smoother_estimate, solve_window)
 from odomgraph.estimators.graph import NB, Problem, linearize
 from odomgraph.result import Estimate
 from odomgraph.estimators.schedule import Schedule
@@ -128,7 +128,10 @@ class _Graph:
         self.lin_first = Problem(prob.kf, prob.robot, prob.prior_mean, prob.prior_cov,
                                  np.zeros_like(prob.zero_slip), None, prob.q_slip, None, None)
         self.history: dict[tuple, list] = {}      # (sensor, beacon) -> recent prediction residuals
+        self.jump: dict[tuple, tuple] = {}        # (sensor, beacon) -> (t, residual before) of a jump held out
         self.gated: dict[str, int] = {}
+        self.gated_rows: set[tuple[str, int]] = set()   # ("gps" | "ranges", index) gated at first linearisation
+        self.held_rows: set[tuple[str, int]] = set()    # those of them held out as a jump: never used
 
     def values(self, k: int, pose, W) -> gtsam.Values:
         v = gtsam.Values()
@@ -153,28 +156,70 @@ class _Graph:
         from the median of the last GATE_HISTORY both beyond FIRST_GATE. Zeroed
         rows are dropped from the factor; the count is kept in self.gated."""
         kf, prob = self.prob.kf, self.lin_first
+        t = float(kf.t[k])
         g0, g1 = np.searchsorted(kf.gps_k, [k, k + 1])
         for i in range(g0, g1):
             rows = 7 + 2 * prob.gps_slot[i] + np.arange(2)
-            self._gate(("gps", 0), lin, rows)
+            self._gate(("gps", 0), lin, rows, i, t, kf.dt[k] / (g1 - g0), float(kf.gps_sigma[i]))
         q0, q1 = np.searchsorted(kf.rng_k, [k, k + 1])
         for i in range(q0, q1):
             rows = np.array([7 + 2 * prob.g_max + prob.rng_slot[i]])
-            self._gate(("ranges", int(kf.rng_id[i])), lin, rows)
+            self._gate(("ranges", int(kf.rng_id[i])), lin, rows, i, t, kf.dt[k], self.prob.robot.range_sigma)
 
-    def _gate(self, key, lin, rows) -> None:
-        from odomgraph.estimators.ekf import GATE_HISTORY, gate_reference
+    def _gate(self, key, lin, rows, i: int, t: float, dt: float, sigma: float) -> None:
+        """Gate one fix or range (index i, about dt [s] after its sensor's
+        previous one, 1-sigma ``sigma``) at keyframe time t. A residual that
+        steps from the previous one faster than JUMP_SPEED is a jump of the
+        sensor (a multipath burst), held out as the EKF holds it
+        (ekf.EKFOptions.jump_speed): no rescue from the recent residuals,
+        until it comes back or JUMP_HOLD has passed."""
+        from odomgraph.estimators.ekf import GATE_HISTORY, JUMP_HOLD, JUMP_SPEED, gate_reference, jumped
         u = -lin.b_u[0, rows]                          # whitened residual at the prediction
         hist = self.history.setdefault(key, [])
-        ref = gate_reference(hist)
-        hist.append(u.copy())
+        held = key in self.jump
+        ref = None if held else gate_reference(hist)
+        limit = FIRST_GATE**2 * len(rows)
+        far = float(u @ u) > limit
+        reject = far and (ref is None or float((u - ref) @ (u - ref)) > limit)
+        if reject and not held and hist and jumped(u, hist[-1], np.eye(len(rows)), dt, JUMP_SPEED / sigma, limit):
+            self.jump[key], held = (t, hist[-1].copy()), True
+        hist.append(self.jump[key][1].copy() if held and reject else u.copy())
         if len(hist) > GATE_HISTORY:
             del hist[0]
-        far = float(u @ u) > FIRST_GATE**2 * len(rows)
-        if far and (ref is None or float((u - ref) @ (u - ref)) > FIRST_GATE**2 * len(rows)):
+        if held and (not reject or t - self.jump[key][0] > JUMP_HOLD):
+            del self.jump[key]                         # it came back (or was held out long enough)
+        if reject:
             lin.A_u[0, rows] = 0.0
             lin.b_u[0, rows] = 0.0
             self.gated[key[0]] = self.gated.get(key[0], 0) + 1
+            self.gated_rows.add((key[0], i))
+            if held:
+                self.held_rows.add((key[0], i))
+                if key[0] == "gps":
+                    # No weight from here on, in every later solve of this run
+                    # (relinearisation, recovery, the final segment solve).
+                    self.prob.kf.gps_sigma[i] = HELD_SIGMA
+
+    def _drop_held(self, k: int, lin) -> None:
+        """Interval k linearised again (robust loss, near its answer) keeps out
+        the fixes and ranges held out as a jump: a multipath burst of 200
+        consistent fixes would otherwise come back in, and a robust loss
+        cannot refuse so many that agree (a 3.6 m burst: 1.2 m RMS, status ok)."""
+        if not self.held_rows:
+            return
+        kf, prob = self.prob.kf, self.lin_first
+        g0, g1 = np.searchsorted(kf.gps_k, [k, k + 1])
+        for i in range(g0, g1):
+            if ("gps", i) in self.held_rows:
+                rows = 7 + 2 * prob.gps_slot[i] + np.arange(2)
+                lin.A_u[0, rows] = 0.0
+                lin.b_u[0, rows] = 0.0
+        q0, q1 = np.searchsorted(kf.rng_k, [k, k + 1])
+        for i in range(q0, q1):
+            if ("ranges", i) in self.held_rows:
+                rows = np.array([7 + 2 * prob.g_max + prob.rng_slot[i]])
+                lin.A_u[0, rows] = 0.0
+                lin.b_u[0, rows] = 0.0
 
     def linear_factors(self, k: int, pose, W, first: bool = False) -> gtsam.NonlinearFactorGraph:
         """The measurement and motion factors of interval k, linearised at (pose, W):
@@ -185,6 +230,7 @@ class _Graph:
             self.first_gate(k, lin)
         else:
             lin = linearize(self.lin_prob, pose, W, k, k + 1)
+            self._drop_held(k, lin)
         g = gtsam.NonlinearFactorGraph()
         lp = self.values(k, pose, W)
         lp.insert(X_KEY(k + 1), gtsam.Pose2(*pose[k + 1]))
@@ -288,8 +334,16 @@ class _Runner:
         if self.graph.gated:
             notes = notes + ["gated at first linearisation (online): " + ", ".join(
                 f"{k} {v}" for k, v in sorted(self.graph.gated.items()))]
+        held: dict[str, int] = {}
+        for sensor, _ in self.graph.held_rows:      # a fix held out has no weight: the robust loss cannot count it
+            if sensor == "gps":
+                held[sensor] = held.get(sensor, 0) + 1
+        gi = sorted(i for s_, i in self.graph.held_rows if s_ == "gps")
+        if gi and self.prob.kf.gps_t is not None:
+            extra["held_out"] = {"gps": self.prob.kf.gps_t[gi]}
         return smoother_estimate(self.prob, self.schedule, self.pose, self.W, Sig, self.method, wall0, notes,
-                                 update_times=self.update_times[1:], recoveries=list(self.recoveries), **extra)
+                                 held=held, update_times=self.update_times[1:], recoveries=list(self.recoveries),
+                                 **extra)
 
     def _watch(self, j: int) -> None:
         """Divergence watch on interval j's GPS fixes and ranges, at the estimate just
@@ -301,18 +355,22 @@ class _Runner:
         x, y, th = self.pose[j]
         v, w = self.W[j, 0], self.W[j, 1]
         checks = []
+        # Fixes and ranges the first-linearisation gate rejected say nothing about the estimate.
+        gated = self.graph.gated_rows
         g0, g1 = np.searchsorted(kf.gps_k, [j, j + 1])
-        if g1 > g0:
-            tvw = kf.gps_tau_vw[g0:g1]
+        gi = np.array([i for i in range(g0, g1) if ("gps", i) not in gated], int)
+        if gi.size:
+            tvw = kf.gps_tau_vw[gi]
             p, _ = arc_at(x, y, th, v, w, tvw[:, 0], tvw[:, 1])
             h, _ = gps_model.antenna_position(p[:, 0], p[:, 1], p[:, 2], r.gps_lever_arm)
-            checks.append(("GPS fixes", np.sum(((h - kf.gps_xy[g0:g1]) / kf.gps_sigma[g0:g1, None]) ** 2, 1)))
+            checks.append(("GPS fixes", np.sum(((h - kf.gps_xy[gi]) / kf.gps_sigma[gi, None]) ** 2, 1)))
         q0, q1 = np.searchsorted(kf.rng_k, [j, j + 1])
-        if q1 > q0:
-            tvw = kf.rng_tau_vw[q0:q1]
+        qi = np.array([i for i in range(q0, q1) if ("ranges", i) not in gated], int)
+        if qi.size:
+            tvw = kf.rng_tau_vw[qi]
             p, _ = arc_at(x, y, th, v, w, tvw[:, 0], tvw[:, 1])
-            h, _ = ranging.beacon_range(p[:, 0], p[:, 1], p[:, 2], kf.rng_beacon[q0:q1], r.range_lever_arm)
-            checks.append(("ranges", ((h[:, 0] - kf.rng_z[q0:q1]) / r.range_sigma) ** 2))
+            h, _ = ranging.beacon_range(p[:, 0], p[:, 1], p[:, 2], kf.rng_beacon[qi], r.range_lever_arm)
+            checks.append(("ranges", ((h[:, 0] - kf.rng_z[qi]) / r.range_sigma) ** 2))
         limit = self.options.max_mean_residual
         for name, values in checks:
             e = self._ema[name]

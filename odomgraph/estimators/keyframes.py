@@ -68,6 +68,8 @@ class Keyframes:
     """(R,) measured range [m]."""
     rng_id: np.ndarray
     """(R,) index of the beacon in robot.beacons."""
+    gps_t: np.ndarray | None = None
+    """(G,) time of each fix [s]."""
 
     @property
     def dt(self) -> np.ndarray:
@@ -316,7 +318,7 @@ def build_keyframes(log: Log, t_start: float, keyframe_hz: float, causal: bool =
                                               r.velocity_sigma, (pn.accel, pn.yaw_accel), causal,
                                               _max_gap(log.velocity.t, t))
     empty2 = np.zeros((0, 2))
-    gk = gs = np.zeros(0)
+    gk = gs = gt = np.zeros(0)
     gxy = gvw = empty2
     if log.gps is not None and len(log.gps.t):
         g = log.gps
@@ -325,6 +327,7 @@ def build_keyframes(log: Log, t_start: float, keyframe_hz: float, causal: bool =
         gvw = effective(gk, g.t[inside])
         gxy = np.stack([g.x, g.y], -1)[inside]
         gs = (g.sigma if g.sigma is not None else np.full(len(g.t), r.gps_sigma))[inside]
+        gt = g.t[inside]
     rk = rz = rid = np.zeros(0)
     rb = rvw = empty2
     if log.ranges is not None and len(log.ranges.t):
@@ -336,5 +339,5 @@ def build_keyframes(log: Log, t_start: float, keyframe_hz: float, causal: bool =
         rid = rg.beacon[inside]
     return Keyframes(t=t, enc_m=m, enc_sigma=sigma, gyro_z=gyro_z, gyro_sigma=gyro_sd, gyro_n=np.asarray(gyro_n),
                      vel_z=vel_z, vel_sigma=vel_sd, vel_n=np.asarray(vel_n), gps_k=gk.astype(int), gps_tau_vw=gvw,
-                     gps_xy=gxy, gps_sigma=gs, rng_k=rk.astype(int), rng_tau_vw=rvw, rng_beacon=rb, rng_z=rz,
+                     gps_xy=gxy, gps_sigma=gs, gps_t=gt, rng_k=rk.astype(int), rng_tau_vw=rvw, rng_beacon=rb, rng_z=rz,
                      rng_id=np.asarray(rid, int))

@@ -132,11 +132,12 @@ def _scale_free(g: np.ndarray, om: np.ndarray, v: np.ndarray) -> np.ndarray | No
     turns a straight line): g ~ a om + c v + bias. Started from the median
     ratio over the turns both see and the median offset, then fitted by least
     squares to the seconds within 3 MAD, four times over (slip is the
-    minority it leaves out). None when the gyro turns against the wheels."""
+    minority it leaves out). None when the gyro's rate is not the wheels'
+    within a factor of 2 (a mounting or unit mistake: analysis.mounting)."""
     turn = (np.abs(om) > TURN) & (np.abs(g) > TURN)
     q = g[turn] / om[turn]
-    if q.size >= 3 and np.median(q) < 0:
-        return None
+    if q.size >= 3 and not 0.5 < np.median(q) < 2.0:
+        return None                      # upside down, in other units, on another axis
     q = q[(q > 0.5) & (q < 2.0)]
     a0 = float(np.median(q)) if q.size >= 3 else 1.0
     res = g - a0 * om
@@ -149,6 +150,8 @@ def _scale_free(g: np.ndarray, om: np.ndarray, v: np.ndarray) -> np.ndarray | No
             break
         coef, *_ = np.linalg.lstsq(X[keep], g[keep], rcond=None)
         res = g - X @ coef
+        if np.ptp(om[keep]) > 2 * TURN and not 0.5 < coef[0] < 2.0:
+            return None                  # the gyro's rate is no scale error away from the wheels'
     return res
 
 

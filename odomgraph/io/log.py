@@ -339,9 +339,10 @@ def check_clock(log: Log) -> None:
         t = obj.t + log.t_origin  # the messages name the stamps as written
         big = np.abs(t) > MAX_ABS_TIME
         if big.any():
-            v = float(t[np.argmax(big)])
+            k = int(np.argmax(big))
+            v = float(t[k])
             raise LogFormatError(d / name, f"time stamp {v:.4g} is not seconds{_unit_guess(abs(v), 1e8, 1e10)} "
-                                           "(LOG_FORMAT.md: t is in seconds)")
+                                           "(LOG_FORMAT.md: t is in seconds)", _line_of_row(d / name, k))
         spans[key] = (float(t[0]), float(t[-1]))
         if t[-1] - t[0] > MAX_DURATION:
             step = float(np.median(np.diff(t))) if len(t) > 1 else None
@@ -364,7 +365,7 @@ def check_clock(log: Log) -> None:
         if s1 < w0 or s0 > w1:
             raise LogFormatError(d / _FILES[key], f"its times ({s0:.6g} to {s1:.6g} s) do not overlap the wheel "
                                                   f"odometry's ({w0:.6g} to {w1:.6g} s): the files of a log share "
-                                                  "one clock")
+                                                  "one clock", _line_of_row(d / _FILES[key], 0))
         if s1 - s0 > 10 * (w1 - w0) + 60:
             raise LogFormatError(d / _FILES[key], f"spans {s1 - s0:.4g} s, the wheel odometry only {w1 - w0:.4g} s: "
                                                   "the files of a log share one clock and unit (seconds)")
