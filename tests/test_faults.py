@@ -162,7 +162,7 @@ def test_a_multipath_burst_is_held_out_whole(scenario, span, seed, method):
     from odomgraph.estimators.schedule import Schedule
     from odomgraph.pipeline import estimate
     from odomgraph.sim.faults import Faults, inject
-    from odomgraph.sim.scenarios import Rates, paper, yard
+    from odomgraph.sim.scenarios import paper, yard
     base = paper(90.0) if scenario == "paper" else yard(120.0)
     log = inject(base.with_(rates=_replace(base.rates, gps=20.0)), Faults(), seed)
     g = log.gps

@@ -567,8 +567,11 @@ def run_batch(log: Log, schedule: Schedule = Schedule(), options: SmootherOption
     ht = initial.held_out.get("gps") if initial is not None else None
     if ht is not None and ht.size and prob.kf.gps_t is not None:
         on = np.isin(prob.kf.gps_t, ht)
+        # Bursts only (two or more in a row): a single spike is the robust loss's, as any outlier.
+        nxt, prv = np.concatenate([on[1:], [False]]), np.concatenate([[False], on[:-1]])
+        on &= nxt | prv
         prob.kf.gps_sigma[on] = HELD_SIGMA
-        held = {"gps": int(on.sum())}
+        held = {"gps": int(on.sum())} if on.any() else {}
     if initial is not None and initial.recoveries:
         initial = None          # the filter went through a rough patch: do not start there
     if initial is not None:

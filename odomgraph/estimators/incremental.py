@@ -182,23 +182,33 @@ class _Graph:
         far = float(u @ u) > limit
         reject = far and (ref is None or float((u - ref) @ (u - ref)) > limit)
         if reject and not held and hist and jumped(u, hist[-1], np.eye(len(rows)), dt, JUMP_SPEED / sigma, limit):
-            self.jump[key], held = (t, hist[-1].copy()), True
+            self.jump[key], held = (t, hist[-1].copy(), []), True
         hist.append(self.jump[key][1].copy() if held and reject else u.copy())
         if len(hist) > GATE_HISTORY:
             del hist[0]
-        if held and (not reject or t - self.jump[key][0] > JUMP_HOLD):
-            del self.jump[key]                         # it came back (or was held out long enough)
         if reject:
             lin.A_u[0, rows] = 0.0
             lin.b_u[0, rows] = 0.0
             self.gated[key[0]] = self.gated.get(key[0], 0) + 1
             self.gated_rows.add((key[0], i))
             if held:
-                self.held_rows.add((key[0], i))
-                if key[0] == "gps":
-                    # No weight from here on, in every later solve of this run
-                    # (relinearisation, recovery, the final segment solve).
-                    self.prob.kf.gps_sigma[i] = HELD_SIGMA
+                # A burst (two or more held in a row) is held out of every
+                # later solve too; a single spike is left to the robust loss
+                # when its interval is linearised again, as any outlier.
+                burst = self.jump[key][2]
+                burst.append(i)
+                if len(burst) >= 2:
+                    for j in burst[-2:]:          # (_hold is idempotent: the earlier ones are held already)
+                        self._hold(key[0], j)
+        if held and (not reject or t - self.jump[key][0] > JUMP_HOLD):
+            del self.jump[key]                         # it came back (or was held out long enough)
+
+    def _hold(self, sensor: str, i: int) -> None:
+        """Fix or range i is held out of every later solve of this run
+        (relinearisation, recovery, the final segment solve)."""
+        self.held_rows.add((sensor, i))
+        if sensor == "gps":
+            self.prob.kf.gps_sigma[i] = HELD_SIGMA     # no weight
 
     def _drop_held(self, k: int, lin) -> None:
         """Interval k linearised again (robust loss, near its answer) keeps out
