@@ -54,8 +54,12 @@ def test_plain_read_declines_what_it_cannot_name(tmp_path):
     for text in ("t,a\n1,2\n3,4,5\n",        # a long row
                  "t,a\n1,2,3\n4\n",          # a long row and a short one: the same total
                  "t,a\n1,nan\n", "t,a\n1,\n", "t,a\n1,x\n", "t,a\n1,2\n# late comment\n3,4\n",
-                 "t,a\n1,2\n   \n3,4\n"):
-        assert C._read_plain(p, text, ("t", "a"), (), ()) is None, text
+                 "t,a\n1,2\n   \n3,4\n",
+                 "t,a,b\n0.0, ,2\n1.0,3,4\n",   # a blank field (numpy.fromstring reads -1)
+                 "t,a\n0.0,2, \n",
+                 "t\n1\n \n3\n",                # a line of blanks in a one-column file
+                 "t,a\n0.1,2\r3\n"):              # a carriage return inside a line
+        assert C._read_plain(p, text, ("t",), (), ()) is None, text
 
 
 def test_errors_name_the_line_on_either_path(tmp_path):
@@ -79,3 +83,13 @@ def test_written_floats_are_repr(tmp_path_factory, xs):
                   {"t": "%.3f"})
     want = "t,x\n" + "".join(f"{k:.3f},{float(x)!r}\n" for k, x in enumerate(xs))
     assert p.read_text() == want
+
+
+def test_a_copy_is_the_same_text_on_either_path(tmp_path):
+    """"0.1,5" then "0.10,5" are equal numbers but no copy: both readers keep both rows."""
+    p = tmp_path / "f.csv"
+    text = "t,x\n0.1,5\n0.10,5\n0.2,6\n0.2,6\n"
+    fast = C._read_plain(p, text, ("t", "x"), (), ())
+    slow = C._read_rows(p, text, ("t", "x"), (), ())
+    assert fast["_duplicates"] == slow["_duplicates"] == 1
+    assert np.array_equal(fast["t"], slow["t"]) and np.array_equal(fast["_line"], slow["_line"])

@@ -39,8 +39,8 @@ def test_vectorised_ekf_equals_one_run_at_a_time(config, x, y, hold, gate):
         assert b.notes == a.notes and b.n_updates == a.n_updates
 
 
-@pytest.mark.parametrize("span", [(25.0, 27.0), (22.0, 35.0)])
-def test_vectorised_ekf_equals_one_run_at_a_time_through_gps_jumps(span):
+@pytest.mark.parametrize("span,hold", [((25.0, 27.0), 30.0), ((22.0, 35.0), 30.0), ((22.0, 80.0), 5.0)])
+def test_vectorised_ekf_equals_one_run_at_a_time_through_gps_jumps(span, hold):
     """A multipath burst (3.6 m, in some runs only) is held out per run as in
     EKF.run: the same rejections, the same rows."""
     from dataclasses import replace
@@ -50,13 +50,23 @@ def test_vectorised_ekf_equals_one_run_at_a_time_through_gps_jumps(span):
         g = logs[j].gps
         on = (g.t >= span[0]) & (g.t <= span[1] + j)
         logs[j] = logs[j].with_(gps=replace(g, x=np.where(on, g.x + 3.0, g.x), y=np.where(on, g.y - 2.0, g.y)))
-    sch, opt = Schedule(20.0), EKFOptions()
+    sch, opt = Schedule(20.0), EKFOptions(jump_hold=hold)
     many = run_ekf_many(logs, sch, opt)
     for j, (log, b) in enumerate(zip(logs, many)):
         a = run_ekf(log, sch, opt)
         np.testing.assert_allclose(b.mean, a.mean, rtol=0, atol=1e-9)
         np.testing.assert_allclose(b.sigma, a.sigma, rtol=0, atol=1e-9)
         assert b.rejected == a.rejected and b.recoveries == a.recoveries
+        assert b.held_out.keys() == a.held_out.keys()
+        for k in a.held_out:
+            np.testing.assert_array_equal(b.held_out[k], a.held_out[k])
+        if span[1] - span[0] > opt.jump_hold:     # a new level: not held out for ever
+            if j in (1, 2):           # fixes are used again within the hold (P grows, or the hold ends)
+                used = a.innovations["gps"].t
+                assert np.any(used > span[0] + opt.jump_hold), used
+                assert a.held_out["gps"].max() <= span[0] + opt.jump_hold + 1.0
+                assert any("did not come back in 5 s; re-acquiring it" in r for r in a.recoveries), a.recoveries
+            continue
         if j in (1, 2):    # the burst is rejected whole, and the path stays within its sigma
             n_burst = int(np.sum((log.gps.t >= span[0]) & (log.gps.t <= span[1] + j)))
             assert a.rejected.get("gps", 0) >= n_burst - 2

@@ -563,7 +563,7 @@ def run_batch(log: Log, schedule: Schedule = Schedule(), options: SmootherOption
     # The fixes the EKF held out as a jump (a multipath burst) get no weight
     # here either: a robust loss cannot refuse 200 fixes that agree with each
     # other (a probe's 3.6 m burst: 1.2 m RMS at a few cm sigma, status ok).
-    held = {}
+    held, held_out = {}, {}
     ht = initial.held_out.get("gps") if initial is not None else None
     if ht is not None and ht.size and prob.kf.gps_t is not None:
         on = np.isin(prob.kf.gps_t, ht)
@@ -571,7 +571,8 @@ def run_batch(log: Log, schedule: Schedule = Schedule(), options: SmootherOption
         nxt, prv = np.concatenate([on[1:], [False]]), np.concatenate([[False], on[:-1]])
         on &= nxt | prv
         prob.kf.gps_sigma[on] = HELD_SIGMA
-        held = {"gps": int(on.sum())} if on.any() else {}
+        if on.any():
+            held, held_out = {"gps": int(on.sum())}, {"gps": prob.kf.gps_t[on].copy()}
     if initial is not None and initial.recoveries:
         initial = None          # the filter went through a rough patch: do not start there
     if initial is not None:
@@ -599,7 +600,7 @@ def run_batch(log: Log, schedule: Schedule = Schedule(), options: SmootherOption
     notes = [f"batch: {prob.kf.n} keyframes at {options.keyframe_hz:g} Hz, {iters} Gauss-Newton iterations, "
              f"final cost {cost:.1f}; {start}", prob.init.note]
     return smoother_estimate(prob, schedule, pose, W, Sig, "batch", wall0, notes, warnings, held=held,
-                             range_bias=range_bias)
+                             range_bias=range_bias, held_out=held_out)
 
 
 def smoother_estimate(prob: Problem, schedule: Schedule, pose: np.ndarray, W: np.ndarray, Sig: np.ndarray,
@@ -615,8 +616,9 @@ def smoother_estimate(prob: Problem, schedule: Schedule, pose: np.ndarray, W: np
     loss's plus despike's) and the same warnings (the start's, the window's),
     then its own ``warnings``. ``extra``: fields only some smoothers fill
     (online, update_times, recoveries, range_bias). wall0: perf_counter at the
-    run's start. held: measurements per sensor held out before the solve
-    (an incremental smoother's jumps), rejected too."""
+    run's start. held: measurements per sensor held out as a jump before or
+    during the solve (given no weight, so the robust loss cannot count them),
+    rejected too."""
     from dataclasses import replace
     given = Sig[-1][np.ix_(S.SCALE, S.SCALE)].copy()
     Sig = honest_blocks(prob, Sig)

@@ -329,6 +329,7 @@ class EKF:
         jump: dict[tuple, tuple] = {}         # (sensor, beacon) -> (t, innovation before) of a jump held out
         last_t: dict[tuple, float] = {}       # (sensor, beacon) -> time of its previous measurement
         held_t: dict[str, list] = {}          # sensor -> times of the measurements held out as a jump
+        rearm: set[tuple] = set()             # sensors whose hold expired: no new jump until one is accepted
         recoveries: list[str] = []
         stride = max(1, len(t_ev) // 200)
         obs = self.init.observability
@@ -392,24 +393,33 @@ class EKF:
                 h_k = hist[key]
                 y_now = np.atleast_1d(self.last_y).copy()
                 t_prev, last_t[key] = last_t.get(key), t
-                if (nis_k < 0 and code != VEL and key not in jump and h_k
+                if (nis_k < 0 and code != VEL and key not in jump and key not in rearm and h_k
                         and jumped(y_now, h_k[-1], R_k, t - t_prev, opt.jump_speed, gates[code])):
                     jump[key] = (t, h_k[-1].copy())
                 held = key in jump
+                if held and nis_k < 0 and t - jump[key][0] > opt.jump_hold:
+                    # Held out long enough: the jump is the sensor's new level (a
+                    # datum that moved). Its history becomes that level, no new
+                    # jump is taken until one is accepted, and the usual
+                    # re-acquisition below takes over.
+                    recoveries.append(f"t={t:.2f} s: {SENSOR_NAMES[code]} jumped at t={jump[key][0]:.2f} s "
+                                      f"and did not come back in {opt.jump_hold:g} s; re-acquiring it")
+                    del jump[key]
+                    held = False
+                    h_k[:] = [y_now.copy() for _ in h_k]
+                    rearm.add(key)
                 h_k.append(jump[key][1].copy() if held and nis_k < 0 else y_now)
                 if len(h_k) > GATE_HISTORY:
                     del h_k[0]
                 if held and nis_k < 0:
+                    # Held out after a jump: no re-acquisition, until it comes back or the hold ends.
                     held_t.setdefault(SENSOR_NAMES[code], []).append(t)
-                    # Held out after a jump: no re-acquisition, until the hold ends.
-                    if t - jump[key][0] > opt.jump_hold:
-                        recoveries.append(f"t={t:.2f} s: {SENSOR_NAMES[code]} jumped at t={jump[key][0]:.2f} s "
-                                          f"and did not come back in {opt.jump_hold:g} s; re-acquiring it")
-                        del jump[key]
                     n_up += 1
                     continue
                 if held:
                     del jump[key]        # back where the state expects it: the jump is over
+                if nis_k >= 0:
+                    rearm.discard(key)
                 # The gate never locks the filter out: a run of rejections widens
                 # what the sensor sees, and the next measurement re-acquires it.
                 if nis_k < 0:

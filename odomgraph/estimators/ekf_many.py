@@ -149,6 +149,8 @@ def run_ekf_many(logs: list[Log], schedule: Schedule = Schedule(), options: EKFO
     jump_t0: dict[tuple, np.ndarray] = {}
     jump_y: dict[tuple, np.ndarray] = {}         # (N, m) the innovation before the jump
     last_t: dict[tuple, float] = {}
+    rearm: dict[tuple, np.ndarray] = {}          # (N,) hold expired: no new jump until one is accepted
+    held_t: list[dict[str, list]] = [{} for _ in range(n)]
 
     def reference(key):
         """(N, m) median of the recent innovations (ekf.gate_reference), or None."""
@@ -259,22 +261,30 @@ def run_ekf_many(logs: list[Log], schedule: Schedule = Schedule(), options: EKFO
                 # Jumps held out, per run, as in EKF.run.
                 t_prev, last_t[key] = last_t.get(key), t
                 on = jump_on.setdefault(key, np.zeros(n, bool))
+                ra = rearm.setdefault(key, np.zeros(n, bool))
                 if code != VEL and hk and rejected.any():
-                    onset = rejected & ~on & jumped(last_y, hk[-1], R_k, t - t_prev, opt.jump_speed, gates[code])
+                    onset = rejected & ~on & ~ra & jumped(last_y, hk[-1], R_k, t - t_prev, opt.jump_speed,
+                                                          gates[code])
                     if onset.any():
                         jump_t0.setdefault(key, np.zeros(n))[onset] = t
                         jump_y.setdefault(key, np.zeros_like(last_y))[onset] = hk[-1][onset]
                         on |= onset
+                expire = on & rejected & (t - jump_t0[key] > opt.jump_hold) if on.any() else np.zeros(n, bool)
+                for j in np.flatnonzero(expire):
+                    recoveries[j].append(f"t={t:.2f} s: {SENSOR_NAMES[code]} jumped at t={jump_t0[key][j]:.2f} s "
+                                         f"and did not come back in {opt.jump_hold:g} s; re-acquiring it")
+                    for e in hk:                 # the jump is the sensor's new level (EKF.run)
+                        e[j] = last_y[j]
+                on &= ~expire
+                ra |= expire
                 held = on & rejected
+                for j in np.flatnonzero(held):
+                    held_t[j].setdefault(SENSOR_NAMES[code], []).append(t)
                 hk.append(np.where(held[:, None], jump_y[key], last_y) if held.any() else last_y.copy())
                 if len(hk) > GATE_HISTORY:
                     del hk[0]
-                if held.any():
-                    for j in np.flatnonzero(held & (t - jump_t0[key] > opt.jump_hold)):
-                        recoveries[j].append(f"t={t:.2f} s: {SENSOR_NAMES[code]} jumped at t={jump_t0[key][j]:.2f} s "
-                                             f"and did not come back in {opt.jump_hold:g} s; re-acquiring it")
-                        on[j] = False
                 on &= rejected           # back where the state expects it: the jump is over
+                ra &= rejected
                 # Re-acquisition after a run of rejections, per run, as in EKF.run.
                 rl = run_len[code]
                 if code not in run:
@@ -324,6 +334,7 @@ def run_ekf_many(logs: list[Log], schedule: Schedule = Schedule(), options: EKFO
                             t_switch, None if switch_sigma is None else switch_sigma[j], sch.hold,
                             P[j, SCALE_IDX, SCALE_IDX].copy(), inits[j])
         est.recoveries = recoveries[j]
+        est.held_out = {k: np.asarray(v) for k, v in held_t[j].items()}
         for key, v in meas[j].spikes.items():
             est.rejected[key] = est.rejected.get(key, 0) + v
         out.append(est)

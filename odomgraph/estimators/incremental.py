@@ -128,7 +128,9 @@ class _Graph:
         self.lin_first = Problem(prob.kf, prob.robot, prob.prior_mean, prob.prior_cov,
                                  np.zeros_like(prob.zero_slip), None, prob.q_slip, None, None)
         self.history: dict[tuple, list] = {}      # (sensor, beacon) -> recent prediction residuals
-        self.jump: dict[tuple, tuple] = {}        # (sensor, beacon) -> (t, residual before) of a jump held out
+        self.jump: dict[tuple, tuple] = {}        # (sensor, beacon) -> (t, residual before, burst indices) of a jump held out
+        self.rearm: set[tuple] = set()            # hold expired: no new jump until one is accepted
+        self.last_t: dict[tuple, float] = {}      # (sensor, beacon) -> time of its previous measurement
         self.gated: dict[str, int] = {}
         self.gated_rows: set[tuple[str, int]] = set()   # ("gps" | "ranges", index) gated at first linearisation
         self.held_rows: set[tuple[str, int]] = set()    # those of them held out as a jump: never used
@@ -160,19 +162,25 @@ class _Graph:
         g0, g1 = np.searchsorted(kf.gps_k, [k, k + 1])
         for i in range(g0, g1):
             rows = 7 + 2 * prob.gps_slot[i] + np.arange(2)
-            self._gate(("gps", 0), lin, rows, i, t, kf.dt[k] / (g1 - g0), float(kf.gps_sigma[i]))
+            # the fix's own time (a stamp within the interval without gps_t)
+            tf = float(kf.gps_t[i]) if kf.gps_t is not None else t + kf.dt[k] * (i - g0 + 1) / (g1 - g0)
+            self._gate(("gps", 0), lin, rows, i, tf, float(kf.gps_sigma[i]))
         q0, q1 = np.searchsorted(kf.rng_k, [k, k + 1])
         for i in range(q0, q1):
             rows = np.array([7 + 2 * prob.g_max + prob.rng_slot[i]])
-            self._gate(("ranges", int(kf.rng_id[i])), lin, rows, i, t, kf.dt[k], self.prob.robot.range_sigma)
+            # ranges carry no time of their own here: the interval's end, so a
+            # step within one interval is judged over the whole interval
+            self._gate(("ranges", int(kf.rng_id[i])), lin, rows, i, t + kf.dt[k], self.prob.robot.range_sigma)
 
-    def _gate(self, key, lin, rows, i: int, t: float, dt: float, sigma: float) -> None:
-        """Gate one fix or range (index i, about dt [s] after its sensor's
-        previous one, 1-sigma ``sigma``) at keyframe time t. A residual that
-        steps from the previous one faster than JUMP_SPEED is a jump of the
+    def _gate(self, key, lin, rows, i: int, t: float, sigma: float) -> None:
+        """Gate one fix or range (index i, at time t [s], 1-sigma ``sigma``).
+        A residual that steps from the sensor's previous one faster than
+        JUMP_SPEED over the real time between them (an outage in between
+        lets the prediction drift far, and that is no jump) is a jump of the
         sensor (a multipath burst), held out as the EKF holds it
         (ekf.EKFOptions.jump_speed): no rescue from the recent residuals,
-        until it comes back or JUMP_HOLD has passed."""
+        until it comes back, or JUMP_HOLD has passed; then, as in the EKF,
+        the jump is the sensor's new level."""
         from odomgraph.estimators.ekf import GATE_HISTORY, JUMP_HOLD, JUMP_SPEED, gate_reference, jumped
         u = -lin.b_u[0, rows]                          # whitened residual at the prediction
         hist = self.history.setdefault(key, [])
@@ -181,8 +189,21 @@ class _Graph:
         limit = FIRST_GATE**2 * len(rows)
         far = float(u @ u) > limit
         reject = far and (ref is None or float((u - ref) @ (u - ref)) > limit)
-        if reject and not held and hist and jumped(u, hist[-1], np.eye(len(rows)), dt, JUMP_SPEED / sigma, limit):
+        t_prev, self.last_t[key] = self.last_t.get(key), t
+        if (reject and not held and key not in self.rearm and hist and t_prev is not None
+                and jumped(u, hist[-1], np.eye(len(rows)), max(t - t_prev, 1e-3), JUMP_SPEED / sigma, limit)):
             self.jump[key], held = (t, hist[-1].copy(), []), True
+        if held and reject and t - self.jump[key][0] > JUMP_HOLD:
+            # Held out long enough: the jump is the sensor's new level (its
+            # history becomes that level; no new jump until one is accepted).
+            del self.jump[key]
+            held = False
+            hist[:] = [u.copy() for _ in hist]
+            self.rearm.add(key)
+            ref = gate_reference(hist)
+            reject = far and (ref is None or float((u - ref) @ (u - ref)) > limit)
+        if not reject:
+            self.rearm.discard(key)
         hist.append(self.jump[key][1].copy() if held and reject else u.copy())
         if len(hist) > GATE_HISTORY:
             del hist[0]
@@ -200,12 +221,14 @@ class _Graph:
                 if len(burst) >= 2:
                     for j in burst[-2:]:          # (_hold is idempotent: the earlier ones are held already)
                         self._hold(key[0], j)
-        if held and (not reject or t - self.jump[key][0] > JUMP_HOLD):
-            del self.jump[key]                         # it came back (or was held out long enough)
+        if held and not reject:
+            del self.jump[key]                         # it came back: the jump is over
 
     def _hold(self, sensor: str, i: int) -> None:
-        """Fix or range i is held out of every later solve of this run
-        (relinearisation, recovery, the final segment solve)."""
+        """Fix or range i is held out of later linearisations (_drop_held). A
+        fix also gets no weight in any later solve (recovery, the final
+        segment solve, the marginals); a range, which has no sigma of its
+        own in the problem, still counts in those (a known gap)."""
         self.held_rows.add((sensor, i))
         if sensor == "gps":
             self.prob.kf.gps_sigma[i] = HELD_SIGMA     # no weight

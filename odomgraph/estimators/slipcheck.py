@@ -51,9 +51,9 @@ TURN = 0.3
 
 def slipping_stretches(meas, robot, t0: float, t1: float) -> list[tuple[float, float]]:
     """(start, end) [s] of the stretches of [t0, t1] where the wheels report a
-    motion the absolute fixes do not see (or the reverse). [] without GPS
-    (ranges alone are too sparse in geometry for a second-by-second check),
-    or where the wheels' yaw rate contradicts the gyro's (``gyro_stretches``)."""
+    motion the GPS fixes do not see, or the reverse (``fix_stretches``; ranges
+    alone are too sparse in geometry for a second-by-second check), or where
+    the wheels' yaw rate contradicts the gyro's (``gyro_stretches``)."""
     if t1 <= t0:
         return []
     return merged(fix_stretches(meas, robot, t0, t1) + gyro_stretches(meas, robot, t0, t1))
@@ -72,8 +72,9 @@ def merged(stretches) -> list[tuple[float, float]]:
 
 def gyro_stretches(meas, robot, t0: float, t1: float) -> list[tuple[float, float]]:
     """(start, end) [s] of the stretches of [t0, t1] where the wheels turn
-    otherwise than the gyro says (nominal parameters, the gyro's bias taken
-    as its median difference over the window); [] without a gyro."""
+    otherwise than the gyro says (nominal parameters; the scale errors and
+    the bias fitted out by ``_scale_free``); [] without a gyro. The wheels'
+    rates are interval means at their midpoints (measurements.from_log)."""
     if meas.gyro is None:
         return []
     gt, g = meas.gyro

@@ -8,6 +8,7 @@ line, so an hour-long log still reads in well under a second.
 from __future__ import annotations
 
 import codecs
+import re
 from pathlib import Path
 
 import numpy as np
@@ -128,7 +129,9 @@ def _read_plain(path: Path, text: str, required, optional, text_columns) -> dict
     if "#" in body:
         return None
     if "\r" in body:
-        body = body.replace("\r", "")
+        body = body.replace("\r\n", "\n")
+        if "\r" in body:
+            return None                    # a carriage return inside a line: the slow path names it
     lead = len(body) - len(body.lstrip())
     first = header_line + 1 + body[:lead].count("\n")
     body = body.strip()
@@ -138,16 +141,22 @@ def _read_plain(path: Path, text: str, required, optional, text_columns) -> dict
     else:
         if "\n\n" in body:
             return None                    # blank lines: the slow path numbers the rows
+        # A field of nothing but blanks (numpy.fromstring reads it as -1) or a
+        # line of blanks: the slow path says which line.
+        if re.search(r"(^|,)[ \t]*(,|$)", body, re.M):
+            return None
         # Every row must hold ncol fields: the total alone would let a long
         # row and a short one make up for each other.
         b = np.frombuffer(body.encode("utf-8"), np.uint8)
+        if len(b) != len(body):
+            return None                    # not plain ASCII: no number (the offsets below are bytes)
         commas = np.flatnonzero(b == 44)
         ends = np.concatenate([[-1], np.flatnonzero(b == 10), [len(b)]])
         nrow = len(ends) - 1
         del b
         if not (np.diff(np.searchsorted(commas, ends)) == ncol - 1).all():
             return None
-        del commas, ends
+        del commas
         flat = body.replace("\n", ",")
         try:
             a = np.fromstring(flat, sep=",")
@@ -158,8 +167,12 @@ def _read_plain(path: Path, text: str, required, optional, text_columns) -> dict
             return None
         a = a.reshape(nrow, ncol)
     lines = first + np.arange(len(a), dtype=np.int64)
-    # A row written twice is dropped (as _read_rows; equal numbers are an equal row).
+    # A row written twice is dropped, as _read_rows drops it: the same text
+    # (rows with equal numbers are the candidates; "0.1" and "0.10" are not a copy).
     dup = np.flatnonzero((a[1:] == a[:-1]).all(1)) + 1 if len(a) > 1 else np.zeros(0, np.int64)
+    if dup.size:
+        row = lambda k: body[ends[k] + 1:ends[k + 1]].strip()
+        dup = np.array([k for k in dup if row(k) == row(k - 1)], dtype=np.int64)
     if dup.size:
         keep = np.ones(len(a), bool)
         keep[dup] = False
@@ -309,6 +322,8 @@ def write_table(path: Path, columns: dict[str, np.ndarray], formats: dict[str, s
             cols.append(list(map(str, a.tolist())))
         else:
             cols.append(list(map(repr, a.astype(np.float64).tolist())))
+    if any(len(c) != n for c in cols):
+        raise ValueError(f"write_table {path}: columns of unequal length {[len(c) for c in cols]}")
     head = "".join(f"# {ln}\n" for ln in comment.splitlines()) if comment else ""
     body = "\n".join(map(",".join, zip(*cols))) + "\n" if n else ""
     Path(path).write_text(head + ",".join(names) + "\n" + body, encoding="utf-8")
