@@ -30,9 +30,15 @@ def main(argv=None):
     ap.add_argument("--runs", type=int, default=50)
     ap.add_argument("--grid", type=int, default=6)
     ap.add_argument("--workers", type=int, default=None)
+    ap.add_argument("--resume", action="store_true",
+                    help="keep the grid points an interrupted run finished (by default every point runs afresh: "
+                         "points kept from older code would be reported as this code's, and the wall time with them)")
     args = ap.parse_args(argv)
     dest = RESULTS / "montecarlo"
     work = dest / "work"
+    if not args.resume:
+        import shutil
+        shutil.rmtree(work, ignore_errors=True)
     out, rows, frows = {}, [], []
     t_all = time.perf_counter()
     grids = {}
