@@ -72,6 +72,34 @@ def propagate(x, y, theta, v, omega, dt):
     return pose, J
 
 
+def velocity_between(x, y, theta, x1, y1, theta1, dt):
+    """The constant body velocity whose arc (``propagate``) runs from one pose
+    to the next: the inverse of the motion model, for starting a solve.
+
+    omega = wrap(theta1 - theta) / dt; the arc's chord runs along the mid
+    heading theta + omega dt / 2 with length v dt sinc(omega dt / 2), chosen
+    so that the chord ends level with pose 1 along pose 1's heading. The
+    heading and along-track residuals of ``transition_residual`` are then
+    zero (its frame is the predicted pose's, whose heading is theta1); what
+    is left is the sideways part, which no arc flies.
+
+    Args:
+        x, y, theta, x1, y1, theta1: (...) the two poses, world frame [m, rad].
+        dt: (...) time between them [s], nonzero.
+
+    Returns:
+        v [m/s], omega [rad/s]: (...) each.
+    """
+    from odomgraph.factors._math import wrap_angle
+    dt = np.asarray(dt, float)
+    omega = wrap_angle(np.asarray(theta1, float) - theta) / dt
+    half = 0.5 * omega * dt
+    th1 = theta + omega * dt
+    along = np.cos(th1) * (np.asarray(x1, float) - x) + np.sin(th1) * (np.asarray(y1, float) - y)
+    # the chord (direction theta + half) projects onto theta1 by cos(half), |half| < pi/2
+    return along / (dt * sinc(half) * np.cos(half)), omega
+
+
 def arc_at(x, y, theta, v, omega, tau_v, tau_omega):
     """Pose partway through an interval flown with average velocities (v, omega):
     the arc of length v tau_v that turns by omega tau_omega.

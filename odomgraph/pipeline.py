@@ -53,6 +53,11 @@ def _estimate_checked(log: Log, method: Method, schedule: Schedule, progress, op
     factors, fitted noise scales, prior conflicts, mounting and GPS timing."""
     from odomgraph.analysis.mounting import mounting_warnings
     from odomgraph.errors import EstimatorDivergedError
+    motion: dict[str, float] = {}
+    if fit_noise:
+        from odomgraph.analysis.noise import motion_scales, widened_motion
+        motion = motion_scales(log)
+        log = widened_motion(log, motion)
     try:
         est = _estimate_once(log, method, schedule, progress, options)
         _check_physical(est)
@@ -76,7 +81,25 @@ def _estimate_checked(log: Log, method: Method, schedule: Schedule, progress, op
         suspect += gps_offset_warnings(log, est)
     est.warnings += [w for w in suspect if w not in est.warnings] + _window_warnings(est, log, schedule)
     est.flags += suspect
+    _note_motion_scales(est, log, motion)
     return est
+
+
+def _note_motion_scales(est: Estimate, log: Log, motion: dict[str, float]) -> None:
+    """Record the velocity random-walk scales (analysis.noise.motion_scales)
+    beside the sensors' in ``est.noise_scales``, with a warning for each one
+    applied. ``log`` is the widened log the estimate ran on."""
+    from odomgraph.analysis.noise import MOTION_WIDEN_ABOVE
+    pn = log.robot.process
+    for name, f in motion.items():
+        applied = f if f > MOTION_WIDEN_ABOVE else 1.0
+        est.noise_scales[name] = {"measured": f, "applied": applied}
+        if applied > 1.0:
+            unit = "m/s" if name == "accel" else "rad/s"
+            est.warnings.append(f"[process] {name}: the wheels' own {'speed' if name == 'accel' else 'yaw rate'} "
+                                f"wanders {f:.2g}x faster than robot.toml's {getattr(pn, name) / f:.3g} {unit}/sqrt(s) "
+                                f"allows: it was widened to {getattr(pn, name):.3g} for this run (calibrate writes "
+                                "it back)")
 
 
 #: A calibration window with fewer absolute measurements than this calibrates nothing.
@@ -162,10 +185,17 @@ def _with_noise_scales(est: Estimate, log: Log, method: Method, schedule: Schedu
     """Widen GPS and range sigmas that the data say are too small, and run
     again (at most twice): every sigma of the estimate inherits them
     (analysis.noise). The scales found and applied go into the result."""
-    from odomgraph.analysis.noise import WIDEN_ABOVE, noise_scales, widened
+    from odomgraph.analysis.noise import WIDEN_ABOVE, correlation_factors, noise_scales, widened
     applied: dict[str, float] = {}
     cur = log
-    measured = scales = noise_scales(est, cur)
+    measured = noise_scales(est, cur)
+    # Persistence is credited once, on the first pass: the passes after it
+    # measure the scatter against the sigma it widened (analysis.noise). It
+    # multiplies the scatter, not the configured sigma: a generous sigma (the
+    # OptiOdom mocap's, 5-20 % of it scattered) already covers persistent
+    # errors that small.
+    corr = correlation_factors(est, cur)
+    scales = {k: v * corr.get(k, (0.0, 1.0))[1] for k, v in measured.items()}
     for _ in range(2):
         act = {k: v for k, v in scales.items() if v > WIDEN_ABOVE}
         if not act:
@@ -175,11 +205,16 @@ def _with_noise_scales(est: Estimate, log: Log, method: Method, schedule: Schedu
         cur = widened(cur, act)
         est = _estimate_once(cur, method, schedule, None, options)
         scales = noise_scales(est, cur)
-    est.noise_scales = {k: {"measured": v, "applied": applied.get(k, 1.0)} for k, v in measured.items()}
+    est.noise_scales = {k: {"measured": v, "correlation": corr.get(k, (0.0, 1.0))[0],
+                            "applied": applied.get(k, 1.0)} for k, v in measured.items()}
     for k, f in applied.items():
         conf = log.robot.gps_sigma if k == "gps" else log.robot.range_sigma
-        est.warnings.append(f"{k}: the data scatter {f:.2g}x more than robot.toml's sigma ({conf:.3g} m) says: it "
-                            f"was widened to {conf * f:.3g} m for this run (calibrate writes it back)")
+        rho, cf = corr.get(k, (0.0, 1.0))
+        why = (f"the data scatter {measured[k]:.2g}x more than robot.toml's sigma ({conf:.3g} m) says"
+               + (f", and their errors persist from one measurement to the next (lag-1 correlation {rho:.2f}, "
+                  f"worth {cf:.2g}x)" if cf > 1.0 else ""))
+        est.warnings.append(f"{k}: {why}: the sigma was widened {f:.2g}x to {conf * f:.3g} m for this run "
+                            "(calibrate writes it back)")
     return est
 
 
@@ -536,12 +571,17 @@ def _calibration_checks(log: Log, est: Estimate, k, sk, method: Method, schedule
 
 def _with_fitted_noise(robot, est: Estimate, warnings: list):
     """The robot with each GPS/range sigma widened by the scale the data asked
-    for (pipeline._with_noise_scales): calibrate writes it back."""
+    for (pipeline._with_noise_scales), and each velocity random-walk intensity
+    ([process] accel, yaw_accel; _note_motion_scales): calibrate writes them back."""
     for sensor, field_name in (("gps", "gps_sigma"), ("ranges", "range_sigma")):
         f = est.noise_scales.get(sensor, {}).get("applied", 1.0)
         if f > 1.0:
             robot = robot.with_(**{field_name: getattr(robot, field_name) * f})
-    return robot
+    from dataclasses import replace
+    pn = robot.process
+    grown = {k: getattr(pn, k) * est.noise_scales[k]["applied"] for k in ("accel", "yaw_accel")
+             if est.noise_scales.get(k, {}).get("applied", 1.0) > 1.0}
+    return robot.with_(process=replace(pn, **grown)) if grown else robot
 
 
 def _is_calibration_file(path: Path) -> bool:

@@ -63,6 +63,32 @@ def test_motion_is_the_exact_arc():
     np.testing.assert_allclose(pose_eps, pose0, atol=1e-7)
 
 
+@pytest.mark.parametrize("s", random_states(20) + EDGE)
+@pytest.mark.parametrize("dt", [0.05, 0.2, 1.0])
+def test_velocity_between_inverts_the_arc(s, dt):
+    """The velocity read off two poses flies the arc between them: propagate
+    returns the second pose to 1e-9 (on arcs that turn less than half a turn,
+    which wrap_angle can tell apart), and transition_residual is zero."""
+    if abs(s["omega"] * dt) >= np.pi:
+        pytest.skip("turns half a turn or more within dt")
+    args = [s[k] for k in motion.INPUTS]
+    p1, _ = motion.propagate(*args, dt)
+    v, w = motion.velocity_between(s["x"], s["y"], s["theta"], p1[0], p1[1], wrap_angle(p1[2]), dt)
+    assert v == pytest.approx(s["v"], abs=1e-9) and w == pytest.approx(s["omega"], abs=1e-9)
+    e, _, _ = motion.transition_residual(s["x"], s["y"], s["theta"], v, w, dt, p1[0], p1[1], p1[2])
+    np.testing.assert_allclose(e, 0.0, atol=1e-9)
+
+
+def test_velocity_between_leaves_only_the_sideways_part():
+    """Two poses no arc joins (the second moved 5 cm sideways): the heading and
+    along-track residuals are zero, the lateral one is the 5 cm."""
+    p1, _ = motion.propagate(1.0, 2.0, 0.4, 0.8, 0.6, 0.5)
+    side = np.array([-np.sin(p1[2]), np.cos(p1[2])]) * 0.05
+    v, w = motion.velocity_between(1.0, 2.0, 0.4, p1[0] + side[0], p1[1] + side[1], p1[2], 0.5)
+    e, _, _ = motion.transition_residual(1.0, 2.0, 0.4, v, w, 0.5, p1[0] + side[0], p1[1] + side[1], p1[2])
+    assert abs(e[0]) < 1e-12 and abs(e[2]) < 1e-12 and e[1] == pytest.approx(0.05, abs=1e-12)
+
+
 @pytest.mark.parametrize("s", random_states(10) + EDGE)
 @pytest.mark.parametrize("tau", [(0.05, 0.05), (0.1, 0.03), (0.0, 0.2), (0.2, 0.0)])
 def test_arc_at_jacobian_and_equal_times(s, tau):

@@ -250,19 +250,22 @@ def test_keyframe_fixes_use_the_wheel_travel_inside_the_interval():
 
 
 def test_fixed_lag_recovers_on_far_off_nominal_parameters():
-    """The libRSF cut's wheel speeds are about 2x the true speeds. Fixed-lag's
-    linear factors, linearised at predictions made with them, leave the
-    ranges; the watch catches it, the window is re-solved, and the smoother
-    carries on, saying so (it used to stop, and before that to drift off
-    tens of metres)."""
+    """A robot.toml whose track is half the real one (the libRSF cut's
+    readme, read literally, gives that). Fixed-lag's linear factors,
+    linearised at predictions made with it, leave the ranges; the watch
+    catches it, the window is re-solved, the smoother carries on, says so,
+    and the result is flagged (measured: one re-solve at 24 s, status
+    degraded, 1.4 m RMS at 51-57 % coverage; it used to stop, and before
+    that to drift off tens of metres)."""
     from pathlib import Path
     from odomgraph.io.importers.librsf import import_librsf
-    from odomgraph.pipeline import status_of
+    from odomgraph.pipeline import estimate, status_of
     log = import_librsf(Path(__file__).parent / "data" / "librsf" / "Indoor_UWB_Input.txt")
-    est = run_fixed_lag(log, Schedule(0.0))
+    log = log.with_(robot=log.robot.with_(track_width=0.5 * log.robot.track_width))
+    est = estimate(log, "fixed-lag", Schedule(0.0))
     assert est.recoveries and all("re-solved" in r for r in est.recoveries)
-    assert status_of(est)[0] == "recovered"
-    assert truth_errors(est, log).rms_position_m < 0.45      # measured 0.30; dead reckoning 1.23 m
+    assert status_of(est)[0] != "ok"
+    assert truth_errors(est, log).rms_position_m < 2.0
 
 
 def test_wheel_speed_units_shrink_the_poor_gps_scale_bias():

@@ -22,7 +22,7 @@ import numpy as np
 
 from odomgraph.factors import pose2
 from odomgraph.factors._math import wrap_angle
-from odomgraph.factors.motion import propagate
+from odomgraph.factors.motion import propagate, velocity_between
 from odomgraph import state as S
 from odomgraph.checks import bounded, check_fields
 from odomgraph.errors import EstimatorDivergedError
@@ -134,6 +134,13 @@ def initial_guess(prob: Problem, ekf: Estimate) -> tuple[np.ndarray, np.ndarray]
     for j, i in enumerate(range(S.V, S.N)):
         W[:, j] = np.interp(mid, ekf.t, m[:, i])
     W[:, 5:8] = m[-1, S.SCALE]
+    # v and omega of each interval from its two poses, so that the start obeys
+    # the motion model: the motion rows are 1e-4 rad / 1 mm tight, and the
+    # filter's rates at interval midpoints miss its own poses by enough for a
+    # start cost of ~1e8 (the libRSF cut), whose first Gauss-Newton step then
+    # lands in the slip model's mirror solution.
+    W[:-1, 0], W[:-1, 1] = velocity_between(pose[:-1, 0], pose[:-1, 1], pose[:-1, 2],
+                                            pose[1:, 0], pose[1:, 1], pose[1:, 2], prob.kf.dt)
     return pose, W
 
 

@@ -3,12 +3,23 @@
 Each line is one measurement, selected by its first word:
 
     range2    t range cov anchor_x anchor_y anchor_id snr
-    odom2diff t v_right v_left v_y track cov_right cov_left cov_y
+    odom2diff t v_a v_b v_y half_track cov_a cov_b cov_y   (readme: v_right v_left ... track)
     point2    t x y ...                                  (ground truth file)
 
 Wheel speeds become wheel_speeds.csv (already in m/s: nominal ticks per metre
 are set to 1), ranges become ranges.csv with the anchors as beacons, and
 point2 lines become truth.csv.
+
+Which wheel is which, and what "distance between wheels" means, are taken
+from libRSF's own odometry factor (include/factors/OdometryFactor2DDifferential.h),
+not from the dataset's readme: that factor predicts its first speed as
+v - W*omega and its second as v + W*omega, and turns at
+(second - first) / (2 W). With yaw counter-clockwise, v - W*omega is the
+left wheel (LOG_FORMAT.md), whatever the readme calls it, and W is half the
+track. The Labyrinth cut agrees: with the readme's labels the wheels turn
+the robot the wrong way (heading change over 2-5 s against the truth's:
+correlation -0.995, slope -0.48); read as the factor reads them, slope
++0.96 (tests/test_importers.py).
 """
 from __future__ import annotations
 
@@ -48,10 +59,11 @@ def import_librsf(input_txt: Path | str, gt_txt: Path | str | None = None) -> Lo
     for lineno, parts in _lines(input_txt):
         kind = parts[0]
         if kind == "odom2diff":
-            t, vr, vl, _vy, track, cr, cl = _floats(input_txt, lineno, parts, 7)
-            if not (track > 0 and cr > 0 and cl > 0):
+            # first = v - W*omega (our left wheel), W = half the track: see the module docstring
+            t, vl, vr, _vy, half_track, cl, cr = _floats(input_txt, lineno, parts, 7)
+            if not (half_track > 0 and cr > 0 and cl > 0):
                 raise LogFormatError(input_txt, "odom2diff needs a positive track width and variances", lineno)
-            odo.append((t, vl, vr, track, cl, cr))
+            odo.append((t, vl, vr, 2.0 * half_track, cl, cr))
         elif kind == "range2":
             t, r, cov, ax, ay, aid = _floats(input_txt, lineno, parts, 6)
             if not (r >= 0 and cov > 0):
