@@ -122,7 +122,8 @@ def honesty_row(log: str, method: str, r: dict, warnings_shown: int = 0) -> str:
     return (f"| {log} | {method} | {r['status']} | "
             + (f"{r['rms_position_m']:.3f}" if r["rms_position_m"] is not None else "–") + " | "
             + (f"{cov['x']:.2f} / {cov['y']:.2f}" if cov else "–") + " | "
-            + (", ".join(f"{k} ×{v:.2g}" for k, v in r["noise_scales"].items()) or "–") + f" | {said} |")
+            + (", ".join(f"{k} ×{v:.2g}" for k, v in r["noise_scales"].items()
+                         if k not in ("accel", "yaw_accel") or v != 1.0) or "–") + f" | {said} |")
 
 
 def real_data_honesty(results: Path) -> str:
@@ -460,7 +461,8 @@ def librsf_limits(results: Path) -> str:
             f"  With default options and no `[initial]` pose {finish} ({status}),\n"
             f"  at {_rng(rms, '{:.2f}')} m RMS, with {_rng([100 * c for c in cov], '{:.0f}')} % of positions "
             "inside ±3σ\n"
-            f"  (x and y), because the range σ is widened {_rng(wide, '{:.1f}')}× for the offsets' persistence\n"
+            f"  (x and y), because the range σ is widened {_rng(wide, '{:.1f}')}× for their scatter and the\n"
+            "  offsets' persistence\n"
             "  (\"The noise model, checked against the data\"). Only batch can estimate the\n"
             f"  offsets (`--range-bias`: {d['librsf_batch, range bias per beacon']:.3f} m against "
             f"{d['librsf_batch']:.3f} m without, slip-only\n"
@@ -892,8 +894,8 @@ def real_data_findings(results: Path) -> str:
         f"  estimated biases of {_minus(_rng(est, '{:+.2f}'))} m. The robust losses alone give "
         + " and ".join(f"{v:.3f} m ({k})" for k, v in robust_rsf.items()) + ".\n"
         f"- **libRSF, incremental smoothers:** on this cut {' and '.join(inc)}.\n"
-        "  Its wheel speeds read far above the true speeds, and factors linearised\n"
-        "  at predictions made with them are hard to follow. Before session 2\n"
+        "  Its robot pivots at up to 2.4 rad/s, and factors linearised\n"
+        "  at predictions made through such turns are hard to follow. Before session 2\n"
         "  isam2 and fixed-lag returned paths far off without a word. A watch on\n"
         "  post-fit residuals now recovers them or stops them with the reason, as\n"
         "  the EKF's NIS watch does.\n\n  " + _source("real_data", d))

@@ -704,7 +704,14 @@ def calibrate(
         _out(f"GPS time offset {o['value']:+.3f} ± {o['sigma']:.3f} s (written as [gps] time_offset)")
     pn = rep["process_noise"]
     if pn["held_out_rms_m"]:
-        cv = ", ".join(f"x{r['factor']:g}: {100 * r['rms_m']:.2f} cm" for r in pn["held_out_rms_m"])
+        from odomgraph.io.robot import ProcessNoise
+        d = ProcessNoise()
+        # a candidate below the wheels' own motion ran at it (pipeline.tune_process_noise)
+        floored = lambda r: (r["accel"] > d.accel * r["factor"] * (1 + 1e-9)
+                             or r["yaw_accel"] > d.yaw_accel * r["factor"] * (1 + 1e-9))
+        cv = ", ".join(f"x{r['factor']:g}"
+                       + (f" (ran at accel {r['accel']:.3g}, yaw {r['yaw_accel']:.3g}: the wheels' floor)"
+                          if floored(r) else "") + f": {100 * r['rms_m']:.2f} cm" for r in pn["held_out_rms_m"])
         _out(f"process noise: accel {pn['accel']:.3g} m/s^2/sqrt(Hz), yaw {pn['yaw_accel']:.3g} rad/s^2/sqrt(Hz) "
                    f"(held-out fix error by multiple of the default: {cv})")
     a, b = rep["dead_reckoning_nominal"], rep["dead_reckoning_calibrated"]

@@ -144,11 +144,11 @@ def _check_physical(est: Estimate) -> None:
 
 def _prior_warnings(est: Estimate, log: Log) -> list[str]:
     """A warning when a scale factor lands far outside its prior: the nominal
-    parameters are badly off (the libRSF cut's wheels read twice their speed
-    against a 5 % prior), and everything that rests on the prior (the
-    slip/scale split, the sigmas) deserves suspicion. Running again with a
-    wide prior was tried: on that cut it let the scale factors run to 10-28,
-    a 30 s range-only log cannot pin them."""
+    parameters are badly off (the libRSF cut as first imported, its track
+    halved: scale factors twice nominal against a 5 % prior), and everything
+    that rests on the prior (the slip/scale split, the sigmas) deserves
+    suspicion. Running again with a wide prior was tried: on that cut it let
+    the scale factors run to 10-28, a 30 s range-only log cannot pin them."""
     pn = log.robot.process
     k = est.mean[-1, S.SCALE]
     off = float(np.max(np.abs(k - 1.0)))
@@ -210,7 +210,9 @@ def _with_noise_scales(est: Estimate, log: Log, method: Method, schedule: Schedu
     for k, f in applied.items():
         conf = log.robot.gps_sigma if k == "gps" else log.robot.range_sigma
         rho, cf = corr.get(k, (0.0, 1.0))
-        why = (f"the data scatter {measured[k]:.2g}x more than robot.toml's sigma ({conf:.3g} m) says"
+        why = ((f"the data scatter {measured[k]:.2g}x more than robot.toml's sigma ({conf:.3g} m) says"
+                if measured[k] > 1.0 else f"the data scatter within robot.toml's sigma ({conf:.3g} m; "
+                                          f"{measured[k]:.2g}x)")
                + (f", and their errors persist from one measurement to the next (lag-1 correlation {rho:.2f}, "
                   f"worth {cf:.2g}x)" if cf > 1.0 else ""))
         est.warnings.append(f"{k}: {why}: the sigma was widened {f:.2g}x to {conf * f:.3g} m for this run "
@@ -419,8 +421,11 @@ def tune_process_noise(log: Log, schedule: Schedule, method: Method = Method.bat
     best predicts the held-out fixes wins (2-fold would double the cost for
     little: the held-out fixes interleave with the used ones).
 
-    Returns (ProcessNoise, table of (factor, held-out RMS [m])), or
-    (log.robot.process, []) when the log has too few fixes.
+    Returns (ProcessNoise, table of (factor, held-out RMS [m], the
+    ProcessNoise that ran)), or
+    (log.robot.process, []) when the log has too few fixes. A candidate below
+    the wheels' own motion intensity runs at that intensity instead (and
+    once: the factors that fall below it share one row, the lowest).
     """
     import numpy as np
     from dataclasses import replace
@@ -433,21 +438,31 @@ def tune_process_noise(log: Log, schedule: Schedule, method: Method = Method.bat
         return base, []
     train, held = split
     d = ProcessNoise()
-    table = []
+    # A candidate below the wheels' own intensity would be widened to it by
+    # estimate (analysis.noise.motion_scales): floor the candidates there, so
+    # that the table holds the intensities that actually ran.
+    floor = base
+    if options.get("fit_noise", True):
+        from odomgraph.analysis.noise import motion_scales, widened_motion
+        floor = widened_motion(log, motion_scales(log)).robot.process
+    table, tried = [], set()
     for j, f in enumerate(PROCESS_NOISE_FACTORS):
-        pn = replace(base, accel=d.accel * f, yaw_accel=d.yaw_accel * f)
+        pn = replace(base, accel=max(d.accel * f, floor.accel), yaw_accel=max(d.yaw_accel * f, floor.yaw_accel))
+        if (pn.accel, pn.yaw_accel) in tried:
+            continue
+        tried.add((pn.accel, pn.yaw_accel))
         try:
             est = estimate(train.with_(robot=train.robot.with_(process=pn)), method, schedule, **options)
         except EstimatorDivergedError:
             continue
         res = gps_deviation(est, held) if held.gps is not None else range_residuals(est, held)
-        table.append((f, float(np.sqrt(np.mean(res[1] ** 2)))))
+        table.append((f, float(np.sqrt(np.mean(res[1] ** 2))), pn))
         if progress is not None:
             progress(j + 1, len(PROCESS_NOISE_FACTORS) + 1)
     if not table:
         return base, []
-    f = min(table, key=lambda r: r[1])[0]
-    return replace(base, accel=d.accel * f, yaw_accel=d.yaw_accel * f), table
+    best = min(table, key=lambda r: r[1])[2]
+    return best, table
 
 
 def calibrate(log: Log, schedule: Schedule = Schedule(calibrate_until=None), method: Method = Method.batch,
@@ -484,7 +499,8 @@ def calibrate(log: Log, schedule: Schedule = Schedule(calibrate_until=None), met
         "ticks_per_meter_right": {"value": new.ticks_per_meter_right, "sigma": sk[1] * r.ticks_per_meter_right},
         "track_width": {"value": new.track_width, "sigma": sk[2] * r.track_width},
         "process_noise": {"accel": r.process.accel, "yaw_accel": r.process.yaw_accel,
-                          "held_out_rms_m": [{"factor": f, "rms_m": e} for f, e in table]},
+                          "held_out_rms_m": [{"factor": f, "rms_m": e, "accel": p.accel, "yaw_accel": p.yaw_accel}
+                                             for f, e, p in table]},
     }
     # Dead reckoning on this log, against truth or else the smoother's own path.
     import numpy as np
@@ -501,6 +517,8 @@ def calibrate(log: Log, schedule: Schedule = Schedule(calibrate_until=None), met
     report["reference"] = "truth" if log.truth is not None else "smoothed estimate"
     report.update(_calibration_checks(log, est, k, sk, method, schedule, options))
     new = _with_fitted_noise(new, est, report["warnings"])
+    # what is written, after the data's widening (the tuned value is its floor)
+    report["process_noise"].update(accel=new.process.accel, yaw_accel=new.process.yaw_accel)
     if est.time_offsets.get("gps"):
         new = new.with_(gps_time_offset=est.time_offsets["gps"]["value"])
         report["time_offsets"] = est.time_offsets

@@ -58,8 +58,12 @@ class Estimate:
     time_offsets: dict[str, dict[str, float]] = field(default_factory=dict)
     """Sensor time offsets estimated and applied, {"gps": {"value", "sigma"}} [s]."""
     noise_scales: dict[str, dict[str, float]] = field(default_factory=dict)
-    """Per sensor, the factor by which the data scatter beyond robot.toml's
-    sigma ("measured") and the factor the sigma was widened by ("applied")."""
+    """Per sensor (gps, ranges), the factor by which the data scatter beyond
+    robot.toml's sigma ("measured"), the lag-1 correlation of its residuals
+    ("correlation") and the factor the sigma was widened by ("applied");
+    per velocity random walk ([process] accel, yaw_accel), the factor by which
+    the wheels' own motion exceeds it ("measured") and the widening
+    ("applied"). analysis.noise."""
     warnings: list[str] = field(default_factory=list)
     """One line each: what the user must know to trust the result (unobservable
     parameters, rejected measurements, a hit iteration cap, ...)."""

@@ -123,6 +123,29 @@ def test_a_tight_yaw_walk_is_measured_widened_and_written_back():
     assert any("[process] yaw_accel" in w for w in est.warnings)
     new, rep = calibrate(log, Schedule(None), Method.batch, tune=False)
     assert new.process.yaw_accel == pytest.approx(0.02 * m["yaw_accel"], rel=1e-6)
+    # tuned: no candidate runs below the wheels' intensity, and the report
+    # says what is written
+    new, rep = calibrate(log, Schedule(None), Method.batch, tune=True)
+    pn = rep["process_noise"]
+    assert new.process.yaw_accel >= 0.02 * m["yaw_accel"] * (1 - 1e-9)
+    assert (pn["accel"], pn["yaw_accel"]) == (new.process.accel, new.process.yaw_accel)
+    factors = [r["factor"] for r in pn["held_out_rms_m"]]
+    assert len(factors) == len(set(factors)), factors
     for d, seed in ((20.0, 1), (60.0, 2)):
         ok = motion_scales(inject(paper(d), Faults(), seed))
         assert max(ok.values()) < MOTION_WIDEN_ABOVE, ok
+
+
+def test_calibrate_tunes_no_candidate_below_the_wheels_motion():
+    """On the libRSF cut the wheels wander 9.8x the default yaw_accel: every
+    tuning candidate runs at that floor or above, the table says what ran,
+    and the report states the intensities written."""
+    log = import_librsf(RSF)
+    floor = 0.3 * motion_scales(log)["yaw_accel"]
+    new, rep = calibrate(log)
+    pn = rep["process_noise"]
+    rows = pn["held_out_rms_m"]
+    assert len(rows) == 6 and all(r["yaw_accel"] >= floor * (1 - 1e-9) for r in rows), rows
+    assert [r["yaw_accel"] for r in rows][:3] == pytest.approx([floor] * 3)        # x1, x2.5, x5 floored
+    assert new.process.yaw_accel >= floor * (1 - 1e-9)
+    assert (pn["accel"], pn["yaw_accel"]) == (new.process.accel, new.process.yaw_accel)

@@ -103,7 +103,10 @@ def motion_scales(log) -> dict[str, float]:
                                ("yaw_accel", (m[:, 1] - m[:, 0]) / track, (sg**2).sum(1) / track**2,
                                 pn.yaw_accel)):
         q2 = (np.diff(x) ** 2 - (var[:-1] + var[1:])) / span
-        q2 = np.sort(q2[np.isfinite(q2)])[: max(1, int((1.0 - MOTION_TRIM) * q2.size))]
+        q2 = np.sort(q2[np.isfinite(q2)])
+        if q2.size < MIN_COUNT:
+            continue
+        q2 = q2[: max(1, int((1.0 - MOTION_TRIM) * q2.size))]
         out[name] = float(np.sqrt(max(float(np.mean(q2)), 0.0)) / conf)
     return out
 
@@ -120,6 +123,9 @@ def widened_motion(log, scales: dict[str, float]):
 #: The largest lag-1 correlation credited: a constant offset is correlation 1,
 #: which no finite sigma covers (sqrt(1.9 / 0.1) = 4.4 at most).
 MAX_CORRELATION = 0.9
+#: A pair of measurements further apart than this many of the channel's
+#: median periods is not a neighbour.
+MAX_PAIR_GAP = 5.0
 
 
 def correlation_factors(est, log) -> dict[str, tuple[float, float]]:
@@ -143,15 +149,19 @@ def correlation_factors(est, log) -> dict[str, tuple[float, float]]:
     out = {}
     for sensor in ("gps", "ranges"):
         chans = _residual_channels(est, log, sensor)
-        if not chans or sum(c.size for c in chans) < MIN_COUNT:
+        if not chans or sum(c.size for _, c in chans) < MIN_COUNT:
             continue
-        u = np.concatenate([c[np.isfinite(c)] for c in chans])
+        u = np.concatenate([c[np.isfinite(c)] for _, c in chans])
+        if u.size < MIN_COUNT:
+            continue
         cap = 4.0 * max(1.4826 * float(np.median(np.abs(u))), 1e-12)
         num = den = 0.0
         n = 0
-        for c in chans:
+        for t, c in chans:
             ok = np.abs(c) <= cap          # NaN (held out) and outliers fail
-            pair = ok[1:] & ok[:-1]
+            # neighbours only: a pair across an outage is no persistence
+            gap = np.diff(t)
+            pair = ok[1:] & ok[:-1] & (gap <= MAX_PAIR_GAP * max(float(np.median(gap)), 1e-9))
             num += float(np.sum((c[1:] * c[:-1])[pair]))
             den += float(np.sum(c[ok] ** 2))
             n += int(pair.sum())
@@ -165,8 +175,9 @@ def correlation_factors(est, log) -> dict[str, tuple[float, float]]:
 
 
 def _residual_channels(est, log, sensor: str) -> list[np.ndarray]:
-    """The sensor's whitened residuals against ``est``, one time-ordered
-    array per channel (GPS: east, north; ranges: each beacon)."""
+    """The sensor's whitened residuals against ``est``: one time-ordered
+    (t, u) pair of arrays per channel (GPS: east, north; ranges: each
+    beacon). A held-out measurement's u is NaN."""
     from odomgraph.analysis.metrics import gps_residuals, range_residuals
     held = est.held_out.get(sensor) if est.held_out else None
     if sensor == "gps":
@@ -176,7 +187,7 @@ def _residual_channels(est, log, sensor: str) -> list[np.ndarray]:
         u = res[1] / res[2][:, None]
         if held is not None and held.size:
             u[np.isin(res[0], held)] = np.nan
-        return [u[:, 0], u[:, 1]]
+        return [(res[0], u[:, 0]), (res[0], u[:, 1])]
     res = range_residuals(est, log)
     if res is None or not res[0].size:
         return []
@@ -184,8 +195,10 @@ def _residual_channels(est, log, sensor: str) -> list[np.ndarray]:
     beacon = r.beacon[(r.t >= est.t[0]) & (r.t <= est.t[-1])]
     u = res[1] / log.robot.range_sigma
     if held is not None and held.size:
+        # held-out times name no beacon: a stamp shared by several anchors
+        # masks them all, which only drops data
         u[np.isin(res[0], held)] = np.nan
-    return [u[beacon == b] for b in np.unique(beacon)]
+    return [(res[0][beacon == b], u[beacon == b]) for b in np.unique(beacon)]
 
 
 def _whitened_residuals(est, log, sensor: str) -> np.ndarray | None:

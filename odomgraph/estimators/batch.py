@@ -139,9 +139,21 @@ def initial_guess(prob: Problem, ekf: Estimate) -> tuple[np.ndarray, np.ndarray]
     # filter's rates at interval midpoints miss its own poses by enough for a
     # start cost of ~1e8 (the libRSF cut), whose first Gauss-Newton step then
     # lands in the slip model's mirror solution.
-    W[:-1, 0], W[:-1, 1] = velocity_between(pose[:-1, 0], pose[:-1, 1], pose[:-1, 2],
-                                            pose[1:, 0], pose[1:, 1], pose[1:, 2], prob.kf.dt)
+    # Only where the interval turns less than MAX_GUESS_TURN (the filter's
+    # unwrapped heading says): a wrapped half turn is ambiguous, and the arc's
+    # speed diverges as the turn nears it.
+    th_u = np.interp(t, ekf.t, np.unwrap(m[:, S.THETA]))
+    ok = np.abs(np.diff(th_u)) < MAX_GUESS_TURN
+    v, om = velocity_between(pose[:-1, 0], pose[:-1, 1], pose[:-1, 2], pose[1:, 0], pose[1:, 1], pose[1:, 2],
+                             prob.kf.dt)
+    W[:-1, 0] = np.where(ok, v, W[:-1, 0])
+    W[:-1, 1] = np.where(ok, om, W[:-1, 1])
     return pose, W
+
+
+#: The largest turn [rad] in one keyframe interval whose start velocity is
+#: read off its two poses (initial_guess).
+MAX_GUESS_TURN = 2.5
 
 
 #: Length of the pieces of dead reckoning aligned one by one to the fixes [s].

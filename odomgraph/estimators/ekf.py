@@ -143,8 +143,9 @@ def gate_reference(history: list) -> np.ndarray | None:
     the innovation sequence, far from both; when the state itself is off (a
     wrong nominal wheel scale, an unmodelled stall) every innovation is large
     and alike, and they are used, which is how the filter gets back. On the
-    real libRSF cut, whose wheels read 2x the true speed, a state-only gate
-    rejected 21 good ranges early and the error went from 0.36 to 0.48 m."""
+    real libRSF cut as first imported (its track halved and its wheels
+    swapped, io/importers/librsf.py), a state-only gate rejected 21 good
+    ranges early and the error went from 0.36 to 0.48 m."""
     if len(history) < 3:
         return None
     return np.median(np.asarray(history), 0)

@@ -85,8 +85,8 @@ class Problem:
         """Random walks in wheel-speed units: only with a speed_ref and a
         calibration window. The window pins slip to zero and so anchors the
         scale factors; without one a scale factor can shrink towards zero to
-        escape the priors (a slip-only schedule on the real libRSF log took
-        the track scale to 0)."""
+        escape the priors (a slip-only schedule on the real libRSF log, as
+        first imported, took the track scale to 0)."""
         return self.speed_ref is not None and bool(self.zero_slip.any())
 
     def loss_k(self) -> float:
