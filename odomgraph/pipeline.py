@@ -424,8 +424,9 @@ def tune_process_noise(log: Log, schedule: Schedule, method: Method = Method.bat
     Returns (ProcessNoise, table of (factor, held-out RMS [m], the
     ProcessNoise that ran)), or
     (log.robot.process, []) when the log has too few fixes. A candidate below
-    the wheels' own motion intensity runs at that intensity instead (and
-    once: the factors that fall below it share one row, the lowest).
+    the wheels' own motion intensity (analysis.noise.motion_scales) runs with
+    that intensity instead, for accel and yaw_accel each; candidates that
+    come out identical run once, under the lowest factor.
     """
     import numpy as np
     from dataclasses import replace
