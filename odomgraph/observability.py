@@ -198,3 +198,24 @@ def combinations_of(mean: np.ndarray, cov: np.ndarray) -> dict[str, dict[str, fl
          "scale_track": np.array([0.0, 0.0, 1.0])}
     val = {"scale_common": 0.5 * (kl + kr), "scale_ratio": kr / kl, "scale_track": kt}
     return {n: {"value": val[n], "sigma": float(np.sqrt(max(J[n] @ cov @ J[n], 0.0)))} for n in J}
+
+
+def few_beacons_warnings(log) -> list[str]:
+    """One line when ranges are the only absolute sensor, there is no
+    [initial] pose, and they come from fewer than three beacons: the start
+    pose cannot be multilaterated, and the ranges leave the path free (one
+    beacon: turned about it; two: mirrored across their line). The start is
+    then taken as the origin, which the ranges contradict: a probe's log
+    with one beacon got 1 m RMS at 40 % coverage, unflagged."""
+    r = log.ranges
+    if r is None or not len(r.t) or log.robot.initial is not None:
+        return []
+    if log.gps is not None and len(log.gps.t):
+        return []
+    n = int(np.unique(r.beacon).size)
+    if n >= 3:
+        return []
+    how = "turned about it" if n == 1 else "mirrored across the line through them"
+    return [f"ranges from only {n} beacon{'s' if n > 1 else ''} and no GPS or [initial] pose: the start cannot be "
+            f"multilaterated, and the ranges fix the path only up to being {how}; positions and heading are not "
+            "trustworthy; give robot.toml an [initial] pose"]

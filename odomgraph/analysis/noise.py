@@ -69,6 +69,10 @@ MOTION_TRIM = 0.01
 #: 2.4x (paper, 20 s) with the defaults they are estimated well with, where
 #: the libRSF cut's pivots measure 9.8x.
 MOTION_WIDEN_ABOVE = 3.0
+#: Slower rates [Hz] the measure falls back to, in turn, while the averages'
+#: own noise is more than MOTION_MAX_NOISE of their steps' mean square.
+MOTION_SLOWER = (2.0, 1.0, 0.5)
+MOTION_MAX_NOISE = 0.5
 
 
 def motion_scales(log) -> dict[str, float]:
@@ -84,30 +88,42 @@ def motion_scales(log) -> dict[str, float]:
     mean square, so that the walk's chi-square matches its count. Wheel speed
     is ground speed plus slip, so this bounds the ground's intensity from
     above; it is only used to widen. {} when the log has too few intervals.
+
+    Where the averages' noise is most of their steps (coarse encoders: at
+    20 ticks/m and 5 Hz a tick is 0.1 m/s), what is left after taking it out
+    is mostly chance, and the measure is taken at a slower rate instead
+    (MOTION_SLOWER): a walk's steps grow with the interval and the
+    averages' quantisation noise shrinks with it.
     """
     from odomgraph.estimators.keyframes import build_keyframes
     from odomgraph.estimators.measurements import clean
     log = clean(log)[0]
     from odomgraph.errors import OdomgraphError
-    try:
-        kf = build_keyframes(log, log.t_start, MOTION_HZ)
-    except OdomgraphError:      # a log the estimators refuse, with their own message
-        return {}
-    if kf.n < MIN_COUNT + 2:
-        return {}
-    m, sg, track = kf.enc_m, kf.enc_sigma, log.robot.track_width
-    span = (kf.dt[:-1] + kf.dt[1:]) / 3.0
     pn = log.robot.process
     out = {}
-    for name, x, var, conf in (("accel", m.mean(1), 0.25 * (sg**2).sum(1), pn.accel),
-                               ("yaw_accel", (m[:, 1] - m[:, 0]) / track, (sg**2).sum(1) / track**2,
-                                pn.yaw_accel)):
-        q2 = (np.diff(x) ** 2 - (var[:-1] + var[1:])) / span
-        q2 = np.sort(q2[np.isfinite(q2)])
-        if q2.size < MIN_COUNT:
-            continue
-        q2 = q2[: max(1, int((1.0 - MOTION_TRIM) * q2.size))]
-        out[name] = float(np.sqrt(max(float(np.mean(q2)), 0.0)) / conf)
+    for name, conf in (("accel", pn.accel), ("yaw_accel", pn.yaw_accel)):
+        for hz in (MOTION_HZ,) + MOTION_SLOWER:
+            try:
+                kf = build_keyframes(log, log.t_start, hz)
+            except OdomgraphError:      # a log the estimators refuse, with their own message
+                return out
+            if kf.n < MIN_COUNT + 2:
+                break
+            m, sg, track = kf.enc_m, kf.enc_sigma, log.robot.track_width
+            if name == "accel":
+                x, var = m.mean(1), 0.25 * (sg**2).sum(1)
+            else:
+                x, var = (m[:, 1] - m[:, 0]) / track, (sg**2).sum(1) / track**2
+            step2, noise = np.diff(x) ** 2, var[:-1] + var[1:]
+            ok = np.isfinite(step2) & np.isfinite(noise)
+            if ok.sum() < MIN_COUNT:
+                break
+            span = ((kf.dt[:-1] + kf.dt[1:]) / 3.0)[ok]
+            q2 = np.sort((step2[ok] - noise[ok]) / span)
+            q2 = q2[: max(1, int((1.0 - MOTION_TRIM) * q2.size))]
+            out[name] = float(np.sqrt(max(float(np.mean(q2)), 0.0)) / conf)
+            if np.mean(noise[ok]) <= MOTION_MAX_NOISE * np.mean(step2[ok]):
+                break
     return out
 
 
@@ -174,7 +190,7 @@ def correlation_factors(est, log) -> dict[str, tuple[float, float]]:
     return out
 
 
-def _residual_channels(est, log, sensor: str) -> list[np.ndarray]:
+def _residual_channels(est, log, sensor: str) -> list[tuple[np.ndarray, np.ndarray]]:
     """The sensor's whitened residuals against ``est``: one time-ordered
     (t, u) pair of arrays per channel (GPS: east, north; ranges: each
     beacon). A held-out measurement's u is NaN."""

@@ -138,6 +138,9 @@ def initial_state(robot: RobotConfig, meas: Measurements, pin: dict[str, str] | 
         t0 = tw[0]
         msg = ("no absolute sensor and no [initial] pose in robot.toml: the start pose is taken as the origin, "
                "heading 0 (positions are relative to it)")
+        if meas.ranges is not None:
+            msg = ("no [initial] pose in robot.toml and the ranges never reach three beacons at once, so the "
+                   "start cannot be multilaterated: it is taken as the origin, heading 0")
         return finish(t0, np.zeros(3), np.diag([1e-6, 1e-6, 1e-6]), msg, (msg,))
     fit = consensus_pose(tw, meas.wheel.m[:, 0], meas.wheel.m[:, 1], _wheel_dt(meas), robot.track_width, *fixes,
                          pn.initial_scale_sigma)

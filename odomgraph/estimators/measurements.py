@@ -137,9 +137,15 @@ SPIKE_MADS = 8.0
 SPIKE_ACCEL = 20.0        # wheel speed [m/s^2]
 SPIKE_YAW_ACCEL = 50.0    # yaw rate [rad/s^2]
 SPIKE_FLOOR = (0.3, 0.3)  # and at least this far [m/s, rad/s]
+#: An encoder row is never a spike for being this many ticks off its
+#: neighbours: with coarse encoders sampled fast (20 ticks/m at 50 Hz) one
+#: tick is 2.5 m/s, and a slow robot's rows read 0, 0, 1, 0, ... ticks. Read
+#: as spikes, every tick was rewritten to 0 and the wheels said the robot
+#: stood still (a probe's log: the whole 60 s).
+SPIKE_TICKS = 3.0
 
 
-def _spikes(t: np.ndarray, x: np.ndarray, accel: float, floor: float, half: int = 3) -> np.ndarray:
+def _spikes(t: np.ndarray, x: np.ndarray, accel: float, floor: float | np.ndarray, half: int = 3) -> np.ndarray:
     """(K,) mask of single-sample spikes in a sampled signal x (K,): a Hampel
     filter over +-half neighbours (the sample itself left out), with the
     physical bound ``accel`` times twice the gap to its neighbours as a floor. A step (a
@@ -182,7 +188,7 @@ def despike(log: Log) -> tuple[Log, dict[str, int]]:
         for side, tpm in (("ticks_left", r.ticks_per_meter_left), ("ticks_right", r.ticks_per_meter_right)):
             ticks = getattr(e, side).astype(float).copy()
             speed = ticks[1:] / (tpm * dt)
-            bad = _spikes(t, speed, SPIKE_ACCEL, SPIKE_FLOOR[0])
+            bad = _spikes(t, speed, SPIKE_ACCEL, np.maximum(SPIKE_FLOOR[0], SPIKE_TICKS / (tpm * dt)))
             if bad.any():
                 idx = np.flatnonzero(bad)
                 good = np.flatnonzero(~bad)
