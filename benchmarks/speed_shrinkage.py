@@ -5,9 +5,10 @@ about it.
 Monte-Carlo configuration 1 (GPS + gyro, 60 s, the paper's calibration
 window), gyro 0.005 rad/s, GPS sigma swept; 16 seeds per point. Mean and
 spread of the final scale-factor errors for the EKF, the batch smoother as
-shipped, and the batch smoother with plain random walks
-(SmootherOptions(wheel_speed_units=False)). A mean far outside the spread
-is a bias. Writes results/speed_shrinkage.{json,md}.
+shipped, the batch smoother with plain random walks
+(SmootherOptions(wheel_speed_units=False)), and isam2 and fixed-lag as
+shipped (wheel-speed units as linear factors). A mean far outside the
+spread is a bias. Writes results/speed_shrinkage.{json,md}.
 
     python -m benchmarks.speed_shrinkage
 """
@@ -22,7 +23,8 @@ from benchmarks._common import save
 GPS = (0.05, 0.15, 0.34, 0.7)
 SEEDS = 16
 VARIANTS = {"ekf": ("ekf", {}), "batch": ("batch", {}),
-            "batch, plain walks": ("batch", {"wheel_speed_units": False})}
+            "batch, plain walks": ("batch", {"wheel_speed_units": False}),
+            "isam2": ("isam2", {}), "fixed-lag": ("fixed-lag", {})}
 
 
 def _one(args):

@@ -63,6 +63,10 @@ class GraphOptions:
     pin: tuple[tuple[str, str], ...] = ()
     """(scale combination, reason) pairs to hold at nominal with their prior
     sigma, as if the log could not determine them (observability)."""
+    wheel_speed_units: bool = True
+    """With a calibration window, take the v and slip random walks in
+    wheel-speed units (graph.walk_rows): no prior then pays for shrinking the
+    speeds into larger scale factors. False: the plain walks (as the EKF)."""
 
     def __post_init__(self):
         check_fields(self)
@@ -79,11 +83,6 @@ class SmootherOptions(GraphOptions):
     chi-square change of 0.02 moves no estimate by a noticeable part of its
     sigma, and the tight scale-factor chain otherwise crawls on for dozens of
     iterations in its flat valley."""
-    wheel_speed_units: bool = True
-    """With a calibration window, take the v and slip random walks in
-    wheel-speed units (graph.linearize): no prior then pays for shrinking the
-    speeds into larger scale factors. False: the plain walks (as isam2,
-    fixed-lag and the EKF)."""
 
 
 def build_problem(log: Log, schedule: Schedule, options: GraphOptions, causal: bool = False) -> Problem:

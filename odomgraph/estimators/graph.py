@@ -196,6 +196,51 @@ class Linearization:
     b_bp: np.ndarray | None = None
 
 
+def walk_rows(prob: Problem, W: np.ndarray, k0: int, k1: int):
+    """(A_w0, A_w1, b_w): the whitened random-walk rows of W from keyframe k
+    to k+1 for k in [k0, k1), (n, 8, 8) Jacobians on W_k and W_{k+1} and
+    (n, 8) right-hand sides, in wheel-speed units when the scale factors are
+    anchored (Problem.wheel_speed_units). Shared by batch (linearize) and the
+    incremental smoothers, which give GTSAM the same rows."""
+    w0, w1 = W[k0:k1], W[k0 + 1:k1 + 1]
+    A_w = prob._rw_whiten[k0:k1]
+    b_w = -np.einsum("kij,kj->ki", A_w, w1 - w0)
+    A_w0, A_w1 = -A_w, A_w.copy()
+    if prob.wheel_speed_units:
+        # Steps of (mean ticks/m scale) v and scale x slip, relative to
+        # speed_ref, instead of v and slip. A Gaussian walk on v itself is
+        # cheapest when every speed is small, and the encoder model lets the
+        # scale factors pay for that (k (v + slip) = measured): the MAP
+        # estimate shrinks the speeds, inflating ticks/m and deflating track
+        # by about (walk cost of the manoeuvres) / (GPS information on the
+        # path's size), 2 % at 0.34 m GPS (benchmarks/README.md). In
+        # wheel-speed units that trade earns nothing. omega keeps its plain
+        # walk: heading sensors pin its scale, and a walk on scale_track x
+        # omega measured worse (a track bias with a noisy gyro and good GPS).
+        ref = np.asarray(prob.speed_ref, float)
+        sc0, sc1 = w0[:, 5:8] / ref, w1[:, 5:8] / ref
+        A_w0, A_w1 = A_w0.copy(), A_w1.copy()
+        f0, f1 = 0.5 * (sc0[:, 0] + sc0[:, 1]), 0.5 * (sc1[:, 0] + sc1[:, 1])
+        a = A_w[:, 0, 0]                                          # v: a diagonal whitener row
+        b_w[:, 0] = -a * (f1 * w1[:, 0] - f0 * w0[:, 0])
+        A_w0[:, 0, :] = 0.0
+        A_w1[:, 0, :] = 0.0
+        A_w0[:, 0, 0] = -a * f0
+        A_w1[:, 0, 0] = a * f1
+        for c in (5, 6):
+            A_w0[:, 0, c] = -a * w0[:, 0] / (2 * ref[c - 5])
+            A_w1[:, 0, c] = a * w1[:, 0] / (2 * ref[c - 5])
+        L = A_w[:, 3:5, 3:5]                                      # slips: a 2x2 block
+        b_w[:, 3:5] = -np.einsum("kij,kj->ki", L, sc1[:, 0:2] * w1[:, 3:5] - sc0[:, 0:2] * w0[:, 3:5])
+        A_w0[:, 3:5, :] = 0.0
+        A_w1[:, 3:5, :] = 0.0
+        A_w0[:, 3:5, 3:5] = -L * sc0[:, None, 0:2]
+        A_w0[:, 3:5, 5:7] = -L * (w0[:, 3:5] / ref[0:2])[:, None, :]
+        A_w1[:, 3:5, 3:5] = L * sc1[:, None, 0:2]
+        A_w1[:, 3:5, 5:7] = L * (w1[:, 3:5] / ref[0:2])[:, None, :]
+    return A_w0, A_w1, b_w
+
+
 def linearize(prob: Problem, pose: np.ndarray, W: np.ndarray, k0: int = 0, k1: int | None = None,
               range_bias: np.ndarray | None = None) -> Linearization:
     """Whitened linearisation at the estimate (pose (N, 3) world, W (N, 8),
@@ -318,42 +363,7 @@ def linearize(prob: Problem, pose: np.ndarray, W: np.ndarray, k0: int = 0, k1: i
     A_m1 = pose2.to_body(J1, nxt[:, 2]) * sm[:, :, None]
 
     # --- random walk of W, in wheel-speed units when the scale factors are anchored.
-    w0, w1 = W[k0:k1], W[k0 + 1:k1 + 1]
-    A_w = prob._rw_whiten[k0:k1]
-    b_w = -np.einsum("kij,kj->ki", A_w, w1 - w0)
-    A_w0, A_w1 = -A_w, A_w.copy()
-    if prob.wheel_speed_units:
-        # Steps of (mean ticks/m scale) v and scale x slip, relative to
-        # speed_ref, instead of v and slip. A Gaussian walk on v itself is
-        # cheapest when every speed is small, and the encoder model lets the
-        # scale factors pay for that (k (v + slip) = measured): the MAP
-        # estimate shrinks the speeds, inflating ticks/m and deflating track
-        # by about (walk cost of the manoeuvres) / (GPS information on the
-        # path's size), 2 % at 0.34 m GPS (benchmarks/README.md). In
-        # wheel-speed units that trade earns nothing. omega keeps its plain
-        # walk: heading sensors pin its scale, and a walk on scale_track x
-        # omega measured worse (a track bias with a noisy gyro and good GPS).
-        ref = np.asarray(prob.speed_ref, float)
-        sc0, sc1 = w0[:, 5:8] / ref, w1[:, 5:8] / ref
-        A_w0, A_w1 = A_w0.copy(), A_w1.copy()
-        f0, f1 = 0.5 * (sc0[:, 0] + sc0[:, 1]), 0.5 * (sc1[:, 0] + sc1[:, 1])
-        a = A_w[:, 0, 0]                                          # v: a diagonal whitener row
-        b_w[:, 0] = -a * (f1 * w1[:, 0] - f0 * w0[:, 0])
-        A_w0[:, 0, :] = 0.0
-        A_w1[:, 0, :] = 0.0
-        A_w0[:, 0, 0] = -a * f0
-        A_w1[:, 0, 0] = a * f1
-        for c in (5, 6):
-            A_w0[:, 0, c] = -a * w0[:, 0] / (2 * ref[c - 5])
-            A_w1[:, 0, c] = a * w1[:, 0] / (2 * ref[c - 5])
-        L = A_w[:, 3:5, 3:5]                                      # slips: a 2x2 block
-        b_w[:, 3:5] = -np.einsum("kij,kj->ki", L, sc1[:, 0:2] * w1[:, 3:5] - sc0[:, 0:2] * w0[:, 3:5])
-        A_w0[:, 3:5, :] = 0.0
-        A_w1[:, 3:5, :] = 0.0
-        A_w0[:, 3:5, 3:5] = -L * sc0[:, None, 0:2]
-        A_w0[:, 3:5, 5:7] = -L * (w0[:, 3:5] / ref[0:2])[:, None, :]
-        A_w1[:, 3:5, 3:5] = L * sc1[:, None, 0:2]
-        A_w1[:, 3:5, 5:7] = L * (w1[:, 3:5] / ref[0:2])[:, None, :]
+    A_w0, A_w1, b_w = walk_rows(prob, W, k0, k1)
     if prob.velocity_loss is not None:
         # Robust velocity steps: a robot whose commanded speed jumps (pivots
         # starting and stopping within one encoder period) breaks the Gaussian

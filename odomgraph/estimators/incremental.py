@@ -14,6 +14,12 @@ inside an update, which costs O(n) per factor (ESTIMATION-NOTES.md):
 * random walks are gtsam.BetweenFactorVector, and the slip priors are
   gtsam.PriorFactorVector: zero-slip (the schedule) inside the calibration
   window, robust Cauchy (sparse slip) outside it, as in the batch solver.
+  With a calibration window the walks are in wheel-speed units instead
+  (GraphOptions.wheel_speed_units, graph.walk_rows: the v and slip steps
+  are scale x speed, which no prior can cheapen by shrinking the speeds);
+  those rows are bilinear and enter as linear factors like the
+  measurements'. On 0.5 m GPS at 2 Hz the plain walks put ticks/m 6 % high
+  at 6 sigma (benchmarks/weak_gps.py).
 
 Slip has its own key so that its robust prior can be a built-in factor.
 There are no global keys: the scale factors are per-keyframe copies tied by a
@@ -39,7 +45,7 @@ from odomgraph.checks import bounded
 from odomgraph.errors import EstimatorDivergedError
 from odomgraph.estimators.batch import (HELD_SIGMA, GraphOptions, build_problem, factor_arrays, marginal_blocks,
                                         retract, smoother_estimate, solve_window)
-from odomgraph.estimators.graph import NB, Problem, linearize
+from odomgraph.estimators.graph import NB, Problem, linearize, walk_rows
 from odomgraph.result import Estimate
 from odomgraph.estimators.schedule import Schedule
 from odomgraph.io.log import Log
@@ -278,6 +284,30 @@ class _Graph:
         jf = gtsam.JacobianFactor(X_KEY(k), Am[:, X_COLS], W_KEY(k), Am[:, W_COLS], X_KEY(k + 1), lin.A_m1[0],
                                   lin.b_m[0], gtsam.noiseModel.Unit.Create(3))
         g.add(gtsam.LinearContainerFactor(jf, lp))
+        if self.prob.wheel_speed_units:
+            g.push_back(self.walk_factors(k, pose, W, lp))
+        return g
+
+    def walk_factors(self, k: int, pose, W, lp: gtsam.Values) -> gtsam.NonlinearFactorGraph:
+        """The random walks of W and S from keyframe k to k+1 in wheel-speed
+        units (graph.walk_rows), linearised at (pose, W) ``lp`` holding the
+        keyframe k values. GTSAM's Python JacobianFactor takes three keys at
+        most, and a slip row touches four (both slips, both scale copies):
+        its small derivative on scale copy k+1 is put on copy k, which a
+        scale walk at graph.SCALE_FLOOR holds equal to it."""
+        A0, A1, bw = (a[0] for a in walk_rows(self.prob, W, k, k + 1))
+        lp = gtsam.Values(lp)
+        lp.insert(W_KEY(k + 1), W[k + 1, W_IDX].copy())
+        lp.insert(S_KEY(k + 1), W[k + 1, S_IDX].copy())
+        g = gtsam.NonlinearFactorGraph()
+        w = np.array(W_IDX)
+        jw = gtsam.JacobianFactor(W_KEY(k), A0[np.ix_(w, w)], W_KEY(k + 1), A1[np.ix_(w, w)], bw[w],
+                                  gtsam.noiseModel.Unit.Create(len(w)))
+        g.add(gtsam.LinearContainerFactor(jw, lp))
+        sl = np.array(S_IDX)
+        js = gtsam.JacobianFactor(S_KEY(k), A0[np.ix_(sl, sl)], S_KEY(k + 1), A1[np.ix_(sl, sl)], W_KEY(k),
+                                  A0[np.ix_(sl, w)] + A1[np.ix_(sl, w)], bw[sl], gtsam.noiseModel.Unit.Create(len(sl)))
+        g.add(gtsam.LinearContainerFactor(js, lp))
         return g
 
     def interval_factors(self, k: int, pose, W, first: bool = False) -> gtsam.NonlinearFactorGraph:
@@ -290,11 +320,12 @@ class _Graph:
         """Random walks of W and S from keyframe k to k+1, and the slip prior of interval k."""
         prob = self.prob
         g = gtsam.NonlinearFactorGraph()
-        Q = prob.rw_cov[k]
-        g.add(gtsam.BetweenFactorVector(W_KEY(k), W_KEY(k + 1), np.zeros(6),
-                                        gtsam.noiseModel.Gaussian.Covariance(Q[np.ix_(W_IDX, W_IDX)])))
-        g.add(gtsam.BetweenFactorVector(S_KEY(k), S_KEY(k + 1), np.zeros(2),
-                                        gtsam.noiseModel.Gaussian.Covariance(Q[np.ix_(S_IDX, S_IDX)])))
+        if not prob.wheel_speed_units:         # else: linear factors (walk_factors)
+            Q = prob.rw_cov[k]
+            g.add(gtsam.BetweenFactorVector(W_KEY(k), W_KEY(k + 1), np.zeros(6),
+                                            gtsam.noiseModel.Gaussian.Covariance(Q[np.ix_(W_IDX, W_IDX)])))
+            g.add(gtsam.BetweenFactorVector(S_KEY(k), S_KEY(k + 1), np.zeros(2),
+                                            gtsam.noiseModel.Gaussian.Covariance(Q[np.ix_(S_IDX, S_IDX)])))
         if prob.zero_slip[k]:
             g.add(gtsam.PriorFactorVector(S_KEY(k), np.zeros(2), self.zero_model))
         elif self.robust_model is not None:
@@ -317,6 +348,8 @@ class _Runner:
         self._ema = {"GPS fixes": [2.0, 0, 2, []], "ranges": [1.0, 0, 1, []]}
         # causal: the online row of interval k is produced at t_{k+1} from data up to t_{k+1}
         self.prob = build_problem(log, schedule, options, causal=True)
+        if options.wheel_speed_units:
+            self.prob.speed_ref = self.prob.prior_mean[8:11].copy()   # the prior's scale factors
         self.graph = _Graph(self.prob, options)
         n = self.prob.kf.n
         self.pose = np.zeros((n, 3))
@@ -804,15 +837,17 @@ class FixedLagRunner(_Runner):
         self.smoother = gtsam.IncrementalFixedLagSmoother(self.options.lag, _params(self.options, reuse_slots=True))
         self.done = np.zeros(self.prob.kf.n, bool)
         self.Sig = np.zeros((self.prob.kf.n, NB, NB))
+        self.linear_index: dict[int, list[int]] = {}
+        self._relin_next = 0
         self._update(factors, values, [0])
 
-    def _update(self, factors, values, keyframes):
+    def _update(self, factors, values, keyframes, remove=()):
         stamps = gtsam.FixedLagSmootherKeyTimestampMap()
         for k in keyframes:
             t = float(self.prob.kf.t[k])
             for key in (X_KEY(k), W_KEY(k), S_KEY(k)):
                 stamps.insert((key, t))
-        self.smoother.update(factors, values, stamps)
+        self.smoother.update(factors, values, stamps, list(remove))
 
     def _harvest(self, k, est):
         """Record keyframe k's fixed-lag estimate (from ``est``) and marginals before it leaves the window."""
@@ -864,6 +899,8 @@ class FixedLagRunner(_Runner):
             graph.push_back(self.graph.interval_factors(j, self.pose, self.W))
         self.smoother = gtsam.IncrementalFixedLagSmoother(self.options.lag, _params(self.options, reuse_slots=True))
         self._update(graph, values, range(j0, k + 1))
+        # The new smoother's factors were all linearised at the solution: none to redo.
+        self.linear_index, self._relin_next = {}, k
         est = self.smoother.calculateEstimate()
         for i in range(j0, k + 1):
             self._store(i, est)
@@ -876,11 +913,33 @@ class FixedLagRunner(_Runner):
             est = self.smoother.calculateEstimate()
             for j in leaving:
                 self._harvest(int(j), est)
-        self._update(factors, values, [k])
+        n_lin = sum(1 for i in range(factors.size()) if isinstance(factors.at(i), gtsam.LinearContainerFactor))
+        # Re-linearise the interval that just became `relinearize_after` old,
+        # as ISAM2Runner.step does, while both its keyframes are still inside
+        # the window (a factor on a marginalised key is gone). The wheel-speed
+        # unit walks need it: at the prediction the speed step is zero, and
+        # the linearised walk cannot see what shrinking the speeds costs.
+        j, age, remove, extra = self._relin_next, self.options.relinearize_after, [], None
+        while j < k - 1 and (self.done[j] or j not in self.linear_index):
+            j += 1
+        self._relin_next = j
+        if (age > 0 and j < k - 1 and kf.t[k] - kf.t[j + 1] >= age
+                and kf.t[j] >= kf.t[k] - self.options.lag + kf.dt[k - 1]):
+            extra = self.graph.linear_factors(j, self.pose, self.W)
+            remove = self.linear_index.pop(j)
+            for i in range(extra.size()):
+                factors.add(extra.at(i))
+            self._relin_next = j + 1
+        self._update(factors, values, [k], remove)
+        idx = list(self.smoother.getISAM2Result().getNewFactorsIndices())
+        self.linear_index[k - 1] = idx[:n_lin]
+        if extra is not None:
+            self.linear_index[j] = idx[factors.size() - extra.size():]
         est = self.smoother.calculateEstimate()
-        for j in (k - 1, k):
-            if not self.done[j]:
-                self._store(j, est)
+        # Read back what the next re-linearisation needs, and the newest keyframes.
+        for i in range(min(self._relin_next, k - 1), k + 1):
+            if not self.done[i]:
+                self._store(i, est)
 
     def finish(self, wall0: float) -> Estimate:
         est = self.smoother.calculateEstimate()
