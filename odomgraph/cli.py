@@ -468,9 +468,10 @@ def estimate(
     = None,
     robust_k: Annotated[Optional[float], typer.Option(
         help="Threshold of the robust loss in sigmas (default: 5 Cauchy, 1.345 Huber).")] = None,
-    range_bias: Annotated[bool, typer.Option(
-        "--range-bias", help="batch: also estimate a constant range bias per beacon (UWB antenna delay).")]
-    = False,
+    range_bias: Annotated[Optional[bool], typer.Option(
+        "--range-bias/--no-range-bias", help="batch: estimate a constant range bias per beacon (UWB antenna "
+        "delay), or not (default: when the first fit's residuals show one).")]
+    = None,
     time_offset: Annotated[bool, typer.Option(
         "--time-offset", help="Estimate how late the GPS stamps are against the wheels, and apply it "
                               "(without it, a clear offset is only warned about).")] = False,
@@ -495,7 +496,7 @@ def estimate(
     from odomgraph.pipeline import Method, estimate_to_dir
     schedule = _parse_schedule(calibrate_until, hold)
     options = dict(gate=gate, keyframe_hz=keyframe_hz, lag=lag, slip_cauchy=slip_cauchy,
-                   robust=robust.value if robust else None, robust_k=robust_k, range_bias=range_bias or None,
+                   robust=robust.value if robust else None, robust_k=robust_k, range_bias=range_bias,
                    time_offset=time_offset, rate=rate, at=at.value if at else None)
     if _is_fleet(log_dir, workers, scheduler):
         _fleet("estimate", log_dir, output, Method(method.value), schedule, workers, scheduler, options)
@@ -581,9 +582,10 @@ def compare(
     = None,
     robust: Annotated[Optional[RobustName], typer.Option(help="Smoothers: robust loss for GPS and ranges.")]
     = None,
-    range_bias: Annotated[bool, typer.Option(
-        "--range-bias", help="batch: also estimate a constant range bias per beacon (the others cannot).")]
-    = False,
+    range_bias: Annotated[Optional[bool], typer.Option(
+        "--range-bias/--no-range-bias", help="batch: estimate a constant range bias per beacon, or not "
+        "(default: when the first fit's residuals show one; the others cannot).")]
+    = None,
 ):
     """Run the EKF, iSAM2 (online and smoothed) and the batch smoother on one log and write a
     self-contained report.html, the paper's figures (1-3, 7, NEES/NIS), metrics.json and the estimates.
@@ -594,7 +596,7 @@ def compare(
     log = read_log(log_dir)
     with _MultiProgress() as bars:
         cmp = compare_to_dir(log, output, schedule, bars, gate=gate, keyframe_hz=keyframe_hz,
-                             robust=robust.value if robust else None, range_bias=range_bias or None)
+                             robust=robust.value if robust else None, range_bias=range_bias)
     _print_comparison(cmp.metrics, {k: {n: c["observable"] for n, c in e.calibration.items()}
                                     for k, e in cmp.estimates.items()})
     _out(f"wrote {output}/report.html")

@@ -61,9 +61,11 @@ def _estimate_checked(log: Log, method: Method, schedule: Schedule, progress, op
     try:
         est = _estimate_once(log, method, schedule, progress, options)
         _check_physical(est)
+        est, options, offsets_note = _with_range_offsets(est, log, method, schedule, options)
         if fit_noise:
             est = _with_noise_scales(est, log, method, schedule, options)
         _check_physical(est)
+        est.warnings += offsets_note
     except EstimatorDivergedError as exc:
         # A mounting mistake is the likeliest cause, and the data can name it.
         found = mounting_warnings(log)
@@ -86,6 +88,31 @@ def _estimate_checked(log: Log, method: Method, schedule: Schedule, progress, op
     est.flags += suspect
     _note_motion_scales(est, log, motion)
     return est
+
+
+def _with_range_offsets(est: Estimate, log: Log, method: Method, schedule: Schedule,
+                        options: dict) -> tuple[Estimate, dict, list[str]]:
+    """Beacons that read constantly long or short (analysis.rangeoffsets):
+    batch runs again with a bias state per beacon, unless the caller chose
+    (``range_bias`` given, True or False); the other estimators have none,
+    and say so. Returns the estimate, the options the later runs take, and
+    the warning (added to the final estimate)."""
+    from odomgraph.analysis.rangeoffsets import MIN_BEACONS, offsets_text, range_offsets, significant
+    if log.ranges is None or not len(log.ranges.t) or "range_bias" in options:
+        return est, options, []
+    found = significant(range_offsets(est, log), log.robot.range_sigma)
+    if not found:
+        return est, options, []
+    if method is Method.batch and np.unique(log.ranges.beacon).size >= MIN_BEACONS:
+        options = {**options, "range_bias": True}
+        est = _estimate_once(log, method, schedule, None, options)
+        _check_physical(est)
+        return est, options, [f"ranges: beacons read constantly off ({offsets_text(found)} after a first fit): a "
+                              "bias per beacon was estimated for this run (as --range-bias; summary.json "
+                              "range_bias)"]
+    return est, options, [f"ranges: beacons read constantly off ({offsets_text(found)} after the fit), which "
+                          f"{method.value} has no states for: the positions lean towards them; --method batch "
+                          "estimates a bias per beacon"]
 
 
 def _note_motion_scales(est: Estimate, log: Log, motion: dict[str, float]) -> None:

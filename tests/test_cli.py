@@ -203,3 +203,29 @@ def test_quiet_prints_nothing_and_verbose_prints_the_counts(tmp_path, paper_log_
     np.testing.assert_array_equal(a, b)
     both = r.invoke(app, ["-q", "-v", "estimate", str(paper_log_dir), "-o", str(tmp_path / "x")])
     assert both.exit_code != 0 and not (tmp_path / "x").exists()
+
+
+def test_range_bias_is_automatic_and_can_be_forced_off(tmp_path):
+    """Beacons reading 0.2-0.3 m off: batch estimates a bias per beacon by
+    itself (summary.json range_bias, a warning); --no-range-bias keeps them
+    out, and the widened run says nothing of biases."""
+    from dataclasses import replace
+    from odomgraph.io.log import write_log
+    from odomgraph.sim.faults import Faults, inject
+    from odomgraph.sim.sensor_configs import study_scenario
+    sc = study_scenario(3, 0.05, 0.01, duration=40.0).with_(slips=())
+    log = inject(sc, Faults(), 98)
+    r = log.ranges
+    off = np.array([0.25, -0.2, 0.3])
+    log_dir = write_log(log.with_(ranges=replace(r, range=r.range + off[r.beacon])), tmp_path / "log")
+    auto, off_dir = tmp_path / "auto", tmp_path / "off"
+    res = run("estimate", log_dir, "--method", "batch", "-o", auto)
+    assert res.exit_code == 0, res.output
+    s = json.loads((auto / "summary.json").read_text())
+    got = [s["range_bias"][b.id]["value"] for b in log.robot.beacons]
+    np.testing.assert_allclose(got, off, atol=0.02)
+    assert any("a bias per beacon was estimated" in w for w in s["warnings"])
+    res = run("estimate", log_dir, "--method", "batch", "--no-range-bias", "-o", off_dir)
+    assert res.exit_code == 0, res.output
+    s = json.loads((off_dir / "summary.json").read_text())
+    assert not s.get("range_bias") and not any("bias per beacon" in w for w in s["warnings"])
