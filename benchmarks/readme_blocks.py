@@ -549,13 +549,32 @@ def weak_gps(results: Path) -> str:
             f"{r['batch']['max_abs_z']:.1f}, {r['isam2']['max_abs_z']:.1f} and "
             f"{r['fixed-lag']['max_abs_z']:.1f}σ at worst.\n"
             "  The EKF's is not fixed but flagged: the fixes' own windowed scale\n"
-            "  (`analysis/pathscale.py`: each 10–40 s window of the wheels' path\n"
+            "  (`analysis/pathscale.py`: each 10–160 s window of the wheels' path\n"
             "  fitted to its fixes by a rotation, a translation and one scale common\n"
             "  to all windows) finds the path longer than the estimate's scale factors\n"
             "  make it, and the run is `degraded` with a warning that says by how\n"
             f"  much. Flagged: {flagged}. A GPS σ that the noise model widens\n"
-            "  (persistent errors) moves a log towards that regime. Read scale\n"
-            "  factors from poor-GPS logs with a smoother.\n\n  " + _source("weak_gps", d))
+            "  (persistent errors) moves a log towards that regime.\n"
+            + _weak_long(d) + "\n\n  " + _source("weak_gps", d))
+
+
+def _weak_long(d: dict) -> str:
+    """The long, very weak case of weak_gps.json (a hostile probe's)."""
+    lg = d["long"]
+    r = lg["rows"]
+    sm = ("batch", "isam2", "fixed-lag")
+    errs = [abs(e[0] + e[1]) / 2 for m in sm for e in r[m]["error_pct"]]
+    zs = [max(abs(v) for v in e[:2]) for m in sm for e in r[m]["z"]]
+    flagged = sum(r[m]["n_flagged"] for m in sm)
+    runs = sum(len(r[m]["flagged"]) for m in sm)
+    stopped = sum(len(r[m]["stopped"]) for m in r)
+    checks = [c["z"] for m in sm for c in r[m]["path_scale"] if c is not None]
+    return (f"  Still open: on a long log with very weak fixes ({lg['scenario']}, {lg['duration_s']:g} s, "
+            f"{lg['gps_sigma']:g} m GPS\n  at {lg['gps_hz']:g} Hz) the smoothers' common scale comes out "
+            f"{_rng(errs, '{:.1f}')} % off, up to\n  {max(zs):.1f} of their sigmas, and the check, which "
+            f"there is about as uncertain as\n  the error (z {_rng(checks, '{:.1f}')}), flagged {flagged} of "
+            f"{runs} runs; {stopped} run(s) stopped\n  (isam2: the solver failed). Read scale factors from such "
+            "logs as a few per cent at best.")
 
 
 # --- benchmarks/README.md -------------------------------------------------------------------------------------

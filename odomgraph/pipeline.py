@@ -215,9 +215,22 @@ def _with_noise_scales(est: Estimate, log: Log, method: Method, schedule: Schedu
     """Widen GPS and range sigmas that the data say are too small, and run
     again (at most twice): every sigma of the estimate inherits them
     (analysis.noise). The scales found and applied go into the result."""
-    from odomgraph.analysis.noise import WIDEN_ABOVE, correlation_factors, noise_scales, widened
+    from odomgraph.analysis.noise import (WIDEN_ABOVE, correlation_factors, floored, gps_sigma_floor,
+                                          noise_scales, widened)
     applied: dict[str, float] = {}
     cur = log
+    floor_note = []
+    fl = gps_sigma_floor(est, cur)
+    if fl is not None:
+        # Per-fix sigmas off by more than one factor: the floor first, then
+        # the usual scale on top (1 when the floor explains the scatter).
+        g = cur.gps.sigma
+        cur = floored(cur, *fl)
+        est = _estimate_once(cur, method, schedule, None, options)
+        floor_note = [f"gps: the fixes' own sigmas ({np.quantile(g, 0.1):.3g}-{np.quantile(g, 0.9):.3g} m) are not "
+                      f"off by one factor: their scatter fits sqrt(({fl[0]:.2g} sigma)^2 + ({fl[1]:.3g} m)^2), "
+                      "which this run used (robot.toml cannot hold it: its gps sigma is used only where gps.csv "
+                      "has none)"]
     measured = noise_scales(est, cur)
     # Persistence is credited once, on the first pass: the passes after it
     # measure the scatter against the sigma it widened (analysis.noise). It
@@ -237,8 +250,23 @@ def _with_noise_scales(est: Estimate, log: Log, method: Method, schedule: Schedu
         scales = noise_scales(est, cur)
     est.noise_scales = {k: {"measured": v, "correlation": corr.get(k, (0.0, 1.0))[0],
                             "applied": applied.get(k, 1.0)} for k, v in measured.items()}
+    if fl is not None:
+        est.noise_scales.setdefault("gps", {"measured": 1.0, "correlation": 0.0, "applied": 1.0}).update(
+            floor_factor=fl[0], floor_m=fl[1])
+    est.warnings += floor_note
+    per_fix = log.gps is not None and log.gps.sigma is not None
     for k, f in applied.items():
         conf = log.robot.gps_sigma if k == "gps" else log.robot.range_sigma
+        if k == "gps" and per_fix:
+            # the sigmas in force are the fixes' own (LOG_FORMAT): quote those
+            why = (f"the data scatter {measured[k]:.2g}x more than the fixes' own sigmas (median "
+                   f"{float(np.median(cur.gps.sigma)) / f:.3g} m) say"
+                   + (f", and their errors persist from one measurement to the next (lag-1 correlation "
+                      f"{corr.get(k, (0.0, 1.0))[0]:.2f}, worth {corr.get(k, (0.0, 1.0))[1]:.2g}x)"
+                      if corr.get(k, (0.0, 1.0))[1] > 1.0 else ""))
+            est.warnings.append(f"gps: {why}: every fix's sigma was widened {f:.2g}x for this run (calibrate "
+                                "cannot write it: robot.toml's gps sigma is used only where gps.csv has none)")
+            continue
         rho, cf = corr.get(k, (0.0, 1.0))
         why = ((f"the data scatter {measured[k]:.2g}x more than robot.toml's sigma ({conf:.3g} m) says"
                 if measured[k] > 1.0 else f"the data scatter within robot.toml's sigma ({conf:.3g} m; "
@@ -547,7 +575,8 @@ def calibrate(log: Log, schedule: Schedule = Schedule(calibrate_until=None), met
         report[f"dead_reckoning_{name}"] = {"rms_m": float(np.sqrt(np.mean(e**2))), "final_m": float(e[-1])}
     report["reference"] = "truth" if log.truth is not None else "smoothed estimate"
     report.update(_calibration_checks(log, est, k, sk, method, schedule, options))
-    new = _with_fitted_noise(new, est, report["warnings"])
+    per_fix = log.gps is not None and log.gps.sigma is not None
+    new = _with_fitted_noise(new, est, report["warnings"], per_fix_gps=per_fix)
     # what is written, after the data's widening (the tuned value is its floor)
     report["process_noise"].update(accel=new.process.accel, yaw_accel=new.process.yaw_accel)
     if est.time_offsets.get("gps"):
@@ -618,11 +647,15 @@ def _calibration_checks(log: Log, est: Estimate, k, sk, method: Method, schedule
     return {"warnings": warnings, "unobservable": unobs, "held_out": held, "problems": problems}
 
 
-def _with_fitted_noise(robot, est: Estimate, warnings: list):
+def _with_fitted_noise(robot, est: Estimate, warnings: list, per_fix_gps: bool = False):
     """The robot with each GPS/range sigma widened by the scale the data asked
     for (pipeline._with_noise_scales), and each velocity random-walk intensity
-    ([process] accel, yaw_accel; _note_motion_scales): calibrate writes them back."""
+    ([process] accel, yaw_accel; _note_motion_scales): calibrate writes them back.
+    ``per_fix_gps``: gps.csv has its own sigma column, which robot.toml's gps
+    sigma does not stand for (LOG_FORMAT), so that one is left as it is."""
     for sensor, field_name in (("gps", "gps_sigma"), ("ranges", "range_sigma")):
+        if sensor == "gps" and per_fix_gps:
+            continue
         f = est.noise_scales.get(sensor, {}).get("applied", 1.0)
         if f > 1.0:
             robot = robot.with_(**{field_name: getattr(robot, field_name) * f})

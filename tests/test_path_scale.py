@@ -70,6 +70,29 @@ def test_the_check_measures_a_scale_put_into_a_good_estimate(make, seed, factor)
     assert bent_ps.s == pytest.approx(factor * ps.s, rel=1e-3) and bent_ps.disagrees, bent_ps
 
 
+@pytest.mark.parametrize("seed", [105, 106])
+def test_a_right_filter_less_precise_than_the_check_is_not_flagged(seed):
+    """A probe's false alarm: a big fast robot (track 2 m, 3.3x the paper's
+    speeds, 0.3 m GPS at 5 Hz, lever arm (1.0, 0.3)), where the EKF's
+    common scale was 1.3 of its sigmas off and the check, three times as
+    precise as the filter, flagged it at z 3.8. The difference's sigma is
+    then the filter's minus the check's (PathScale.sigma_difference)."""
+    from odomgraph.sim.scenarios import Segment
+    base = paper(90.0).with_(slips=())
+    fast = lambda ss: tuple(Segment(x.duration, 3.3 * x.v, 0.6 * x.omega) for x in ss)
+    sc = base.with_(prologue=fast(base.prologue), loop=fast(base.loop), rates=replace(base.rates, gps=5.0),
+                    robot=base.robot.with_(track_width=2.0, gps_sigma=0.3, gps_lever_arm=(1.0, 0.3)))
+    log = inject(sc, Faults(), seed)
+    est = estimate(log, "ekf", Schedule(20.0))
+    c = np.array([0.5, 0.5, 0.0])
+    true = np.array(log.truth_scales)
+    z_true = float(c @ (est.mean[-1, S.SCALE] - true) / np.sqrt(c @ est.scale_cov() @ c))
+    ps = path_scale(est, log)
+    assert ps.sigma < ps.sigma_estimate, ps           # the case: the check is the more precise
+    assert abs(z_true) < 3.0 and not ps.disagrees, (z_true, ps)
+    assert not path_scale_warnings(est, log)
+
+
 def _coarse(make, seed, tpm=20.0):
     sc = make(60.0).with_(slips=())
     sc = sc.with_(robot=sc.robot.with_(ticks_per_meter_left=tpm, ticks_per_meter_right=tpm))
