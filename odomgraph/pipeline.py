@@ -104,9 +104,15 @@ def _with_range_offsets(est: Estimate, log: Log, method: Method, schedule: Sched
     if not found:
         return est, options, []
     if method is Method.batch and np.unique(log.ranges.beacon).size >= MIN_BEACONS:
-        options = {**options, "range_bias": True}
-        est = _estimate_once(log, method, schedule, None, options)
-        _check_physical(est)
+        from odomgraph.errors import EstimatorDivergedError
+        try:
+            biased = _estimate_once(log, method, schedule, None, {**options, "range_bias": True})
+            _check_physical(biased)
+        except EstimatorDivergedError as exc:
+            # the first fit stands; the offsets are still said
+            return est, options, [f"ranges: beacons read constantly off ({offsets_text(found)} after the fit); "
+                                  f"a run with a bias per beacon failed ({exc}), so none is estimated"]
+        est, options = biased, {**options, "range_bias": True}
         return est, options, [f"ranges: beacons read constantly off ({offsets_text(found)} after a first fit): a "
                               "bias per beacon was estimated for this run (as --range-bias; summary.json "
                               "range_bias)"]
@@ -260,7 +266,7 @@ def _with_noise_scales(est: Estimate, log: Log, method: Method, schedule: Schedu
         if k == "gps" and per_fix:
             # the sigmas in force are the fixes' own (LOG_FORMAT): quote those
             why = (f"the data scatter {measured[k]:.2g}x more than the fixes' own sigmas (median "
-                   f"{float(np.median(cur.gps.sigma)) / f:.3g} m) say"
+                   f"{float(np.median(log.gps.sigma)):.3g} m{', with the floor above' if fl else ''}) say"
                    + (f", and their errors persist from one measurement to the next (lag-1 correlation "
                       f"{corr.get(k, (0.0, 1.0))[0]:.2f}, worth {corr.get(k, (0.0, 1.0))[1]:.2g}x)"
                       if corr.get(k, (0.0, 1.0))[1] > 1.0 else ""))

@@ -106,7 +106,7 @@ def motion_scales(log) -> dict[str, float]:
             try:
                 kf = build_keyframes(log, log.t_start, hz)
             except OdomgraphError:      # a log the estimators refuse, with their own message
-                return out
+                break
             if kf.n < MIN_COUNT + 2:
                 break
             m, sg, track = kf.enc_m, kf.enc_sigma, log.robot.track_width
@@ -270,10 +270,18 @@ def gps_sigma_floor(est, log) -> tuple[float, float] | None:
     r, sig = r[keep], sig[keep]
     if sig.size < SIGMA_GROUPS * MIN_COUNT or np.quantile(sig, 0.9) < SIGMA_SPREAD * np.quantile(sig, 0.1):
         return None
-    edges = np.quantile(sig, np.linspace(0.0, 1.0, SIGMA_GROUPS + 1))
+    # Receivers often report a few fixed sigmas (RTK fixed / float): those
+    # values are the groups; otherwise quantile bins, without repeated edges
+    # (a bin of 0.01 m claims next to one of 0.3 m must not overlap).
+    vals = np.unique(sig)
+    if vals.size <= 2 * SIGMA_GROUPS:
+        label = np.searchsorted(vals, sig)
+    else:
+        edges = np.unique(np.quantile(sig, np.linspace(0.0, 1.0, SIGMA_GROUPS + 1)))
+        label = np.clip(np.searchsorted(edges, sig, side="right") - 1, 0, edges.size - 2)
     claim, scatter = [], []
-    for a, b in zip(edges[:-1], edges[1:]):
-        sel = (sig >= a) & (sig <= b)
+    for lab in np.unique(label):
+        sel = label == lab
         if sel.sum() < MIN_COUNT:
             continue
         x = r[sel].ravel()

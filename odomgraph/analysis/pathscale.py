@@ -132,7 +132,10 @@ def path_scale(est, log) -> PathScale | None:
     sigma = float(np.hypot(sigma, MODEL_SIGMA))
     C = est.scale_cov()
     c = np.array([0.5, 0.5, 0.0])
-    sig_est = float(np.sqrt(max(float(c @ C @ c), 0.0)))
+    var_est = float(c @ C @ c)
+    if not np.isfinite(var_est):
+        return None
+    sig_est = float(np.sqrt(max(var_est, 0.0)))
     k_mean = 0.5 * (k[0] + k[1])
     return PathScale(s=float(s), sigma=float(sigma), sigma_estimate=sig_est / max(k_mean, 1e-9),
                      windows=n_win, fixes=n_fix, window=window)
@@ -157,7 +160,8 @@ def _fit_windows(g, keep, sig, t_dr, a_dr, t0: float, t1: float, window: float, 
         return None
     # Second pass without the fixes the first fit calls outliers.
     u = np.concatenate(fit[2])
-    cap = OUTLIER * max(1.4826 * float(np.median(np.abs(u))), 1e-12)
+    # u are 2-D residual norms: their median is 1.1774 sigma (Rayleigh)
+    cap = OUTLIER * max(float(np.median(u)) / 1.1774, 1e-12)
     wins = [(d[m], p[m], w[m]) for (d, p, w), r in zip(wins, fit[2]) for m in [np.abs(r) <= cap]
             if m.sum() >= MIN_FIXES]
     if len(wins) < MIN_WINDOWS:
