@@ -42,7 +42,9 @@ def test_a_shrunk_speed_is_flagged_and_a_right_one_is_not(make, seed):
     ps = path_scale(ekf, log)
     true_s = float(np.mean(ekf.mean[-1, [S.SCALE_L, S.SCALE_R]] / true[:2]))
     assert abs(ps.s - true_s) <= 3.0 * ps.sigma, (ps, true_s)
-    if np.max(np.abs(err[:2] / ekf.sigma[-1, [S.SCALE_L, S.SCALE_R]])) > 4.0:
+    off = np.max(np.abs(err[:2] / ekf.sigma[-1, [S.SCALE_L, S.SCALE_R]]))
+    assert make is yard or off > 4.0, off          # the paper log is the shrunk case (measured 6.4 sigma)
+    if off > 4.0:
         assert ps.disagrees, (ps, err)
         assert status_of(ekf)[0] == "degraded"
         assert any("the fixes find the path" in w for w in ekf.warnings), ekf.warnings
