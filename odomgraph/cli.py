@@ -726,6 +726,71 @@ def calibrate(
     _out(f"wrote {output}")
 
 
+@app.command()
+@_user_errors
+def stream(
+    robot: Annotated[Optional[Path], typer.Option(
+        help="robot.toml of the robot (default: the replayed log's).")] = None,
+    method: Annotated[MethodName, typer.Option(help="Estimator (ekf; isam2 and fixed-lag are not streamed yet).")]
+    = MethodName.ekf,
+    calibrate_until: Annotated[str, typer.Option(
+        help="Seconds from the first measurement to estimate scale factors with slip forced to 0 (as estimate).")]
+    = "20",
+    hold: Annotated[HoldName, typer.Option(help="How the scale factors are held after calibration (as estimate).")]
+    = HoldName.consider,
+    gate: Annotated[Optional[float], typer.Option(help="EKF: NIS gate on GPS, range and velocity (as estimate).")]
+    = None,
+    rate: Annotated[Optional[float], typer.Option(
+        min=1e-6, max=1000.0, help="Write at most one row per 1/rate seconds [Hz] (default: every encoder row).")]
+    = None,
+    latency: Annotated[float, typer.Option(
+        min=0.0, help="How far out of order [s] measurements may arrive; older ones are rejected and counted.")]
+    = 0.25,
+    warmup: Annotated[Optional[float], typer.Option(
+        min=0.0, help="Seconds of data held before the filter starts (default: the calibration window, or the "
+                      "start-pose fit without [initial], plus 5 s).")] = None,
+    replay: Annotated[Optional[Path], typer.Option(
+        help="Stream a log directory's files, merged in time order, instead of stdin.")] = None,
+    speed: Annotated[float, typer.Option(
+        min=0.0, help="--replay: pace the lines at this multiple of real time (0: as fast as possible).")] = 0.0,
+    checkpoint: Annotated[Optional[Path], typer.Option(
+        help="Write the estimator's state to this file every --checkpoint-every seconds and at the end.")]
+    = None,
+    checkpoint_every: Annotated[float, typer.Option(
+        min=0.0, help="Seconds of log time between checkpoints.")] = 60.0,
+    resume: Annotated[Optional[Path], typer.Option(
+        help="Go on from a checkpoint (with --replay: after the lines it had read).")] = None,
+):
+    """Estimate live: measurement lines on stdin (<sensor>,<t>,<values...>, LOG_FORMAT.md's columns), one
+    states.csv row per estimate on stdout, flushed as soon as it is known.
+
+    Example lines: encoders,0.023,-6,6  gps,0.152,-0.278,0.0525  gyro,0.011,0.82  ranges,1.2,A,25.3
+    velocity,3.1,0.5,0.1. Bad lines, recoveries and the final counts go to stderr.
+    """
+    from odomgraph.livestream import check_resume, run_stream, summary_lines
+    from odomgraph.online import Online
+    if resume is not None:
+        live = Online.load(resume)
+        check_resume(live, method.value)
+    else:
+        from odomgraph.io.robot import load_robot
+        if robot is None and replay is None:
+            raise _click_exc.UsageError("give --robot robot.toml (or --replay LOG, whose robot.toml is used)")
+        live = Online(load_robot(robot if robot is not None else replay / "robot.toml"), method.value,
+                      _parse_schedule(calibrate_until, hold), latency=latency, warmup=warmup, gate=gate)
+    if replay is not None:
+        from odomgraph.io.log import read_log
+        from odomgraph.io.stream import log_lines
+        lines, source = log_lines(read_log(replay)), str(replay)
+    else:
+        lines, source = sys.stdin, "stdin"
+    st = run_stream(live, lines, sys.stdout, sys.stderr, source=source, rate=rate, speed=speed,
+                    checkpoint=checkpoint, checkpoint_every=checkpoint_every,
+                    skip_lines=live.lines_read if (resume is not None and replay is not None) else 0)
+    for line in summary_lines(live, st):
+        typer.echo(f"odomgraph: {line}", err=True)
+
+
 @app.command("import")
 @_user_errors
 def import_(

@@ -304,7 +304,7 @@ class EKF:
     def run(self, progress=None) -> Estimate:
         """Filter the whole log. ``progress(done, total)`` is called now and then."""
         wall0 = time.perf_counter()
-        m, r, sch, opt = self.meas, self.robot, self.schedule, self.options
+        m = self.meas
         t_ev, code_ev, row_ev = event_stream(m, self.init.t)
         n_rows = int(np.sum(code_ev == WHEEL))
         out_t = np.empty(n_rows)
@@ -312,145 +312,18 @@ class EKF:
         out_var = np.empty((n_rows, S.N))
         out_pose = np.empty((n_rows, 3, 3))
         nis = {k: [] for k in range(5)}
-        t_switch = sch.switch_time(m.t_start)
-        switch_sigma = None
-        track = r.track_width
-        lever_gps, lever_rng = r.gps_lever_arm, r.range_lever_arm
-        R_gyro = np.array([[r.gyro_sigma**2]])
-        R_vel = np.diag(np.square(r.velocity_sigma))
-        R_rng = np.array([[r.range_sigma**2]])
-        gates = gate_thresholds(opt)
+        self.begin()
+        slip_ev = in_stretches(t_ev, self.slipping)
         row = 0
-        n_up = 0
-        nis_ema = [float(d) for d in DOF]
-        nis_clip = [10.0 * opt.max_mean_nis * d for d in DOF]
-        n_seen = [0] * len(DOF)
-        run = {c: [] for c in GATED}         # innovations of the current run of rejections
-        hist: dict[tuple, list] = {}          # (sensor, beacon) -> its last GATE_HISTORY innovations
-        jump: dict[tuple, tuple] = {}         # (sensor, beacon) -> (t, innovation before) of a jump held out
-        last_t: dict[tuple, float] = {}       # (sensor, beacon) -> time of its previous measurement
-        held_t: dict[str, list] = {}          # sensor -> times of the measurements held out as a jump
-        rearm: set[tuple] = set()             # sensors whose hold expired: no new jump until one is accepted
-        recoveries: list[str] = []
         stride = max(1, len(t_ev) // 200)
-        obs = self.init.observability
-        pinned = bool(obs.unobservable)
-        # The schedule's window, less where the fixes say the wheels slipped (slipcheck).
-        slipping, window_warn = in_window(self.init.slipping, m.t_start, t_switch)
-        slip_ev = in_stretches(t_ev, slipping)
         for k in range(len(t_ev)):
             t, code, i = t_ev[k], code_ev[k], row_ev[k]
-            self.predict(t)
-            if switch_sigma is None and t_switch is not None and t >= t_switch:
-                # The schedule switches: from here on every update holds the scale factors.
-                switch_sigma = self.P[SCALE_IDX, SCALE_IDX].copy()
-                self.holding_scale = sch.hold is Hold.consider
-            x = self.x
+            value = self.step(t, code, *event_values(m, code, i), in_slip=slip_ev[k])
+            nis[code].append((t, value))
             if code == WHEEL:
-                if (switch_sigma is None and t_switch is not None and not slip_ev[k]) or not obs.slip_observable:
-                    h, H = pseudo.zero_slip(x[6], x[7])                              # eq. 35-36
-                    self.update(np.zeros(2), h, H, SLIP_IDX, self._R_slip)
-                elif switch_sigma is not None and sch.hold is Hold.pseudo:
-                    h, H = pseudo.hold_scale(x[8], x[9], x[10])                      # eq. 37-38
-                    self.update(h.copy(), h, H, SCALE_IDX, self._R_scale)
-                x = self.x  # the pseudo-update has moved the state
-                h, H = encoder.wheel_speeds(x[3], x[4], x[6], x[7], x[8], x[9], x[10], track)  # eq. 29-34
-                s = m.wheel.sigma[i]
-                nis[WHEEL].append((t, self.update(m.wheel.m[i], h, H, ENC_IDX, np.diag(s * s))))
-                self._check()
                 out_t[row] = t
-                out_x[row] = self.x
-                # Rows carry honest covariance: what pinned (unobservable)
-                # scale combinations leave uncertain (observability.decondition).
-                Pr = self.P if not pinned else decondition(self.P, obs, S.SCALE, obs.prior_sigma)
-                out_var[row] = np.diagonal(Pr)
-                out_pose[row] = Pr[0:3, 0:3]
+                out_x[row], out_var[row], out_pose[row] = self.row()
                 row += 1
-            elif code == GYRO:
-                h, H = gyro.yaw_rate(x[4], x[5])                                      # eq. 10-11
-                nis[GYRO].append((t, self.update(m.gyro[1][i:i + 1], h, H, GYRO_IDX, R_gyro)))
-            elif code == GPS:
-                h, H = gps.antenna_position(x[0], x[1], x[2], lever_gps)              # eq. 8-9
-                sg = m.gps[2][i]
-                key = (GPS, 0)
-                R_k = np.eye(2) * sg * sg
-                # a sensor held out after a jump gets no rescue from its recent innovations (the jump's)
-                ref = None if key in jump else gate_reference(hist.setdefault(key, []))
-                nis[GPS].append((t, self.update(m.gps[1][i], h, H, POSE_IDX, R_k, gates[GPS], ref)))
-            elif code == RANGE:
-                h, H = ranging.beacon_range(x[0], x[1], x[2], m.ranges[1][i], lever_rng)   # eq. 12-16
-                key = (RANGE, m.ranges_id[i])
-                R_k = R_rng
-                ref = None if key in jump else gate_reference(hist.setdefault(key, []))
-                nis[RANGE].append((t, self.update(m.ranges[2][i:i + 1], h, H[:, :3], POSE_IDX, R_rng,
-                                                  gates[RANGE], ref)))
-            else:
-                h, H = velocity.body_velocity(x[3], x[4])                             # sec. VI-B
-                key = (VEL, 0)
-                nis[VEL].append((t, self.update(m.velocity[1][i], h, H, VEL_IDX, R_vel, gates[VEL],
-                                                gate_reference(hist.setdefault(key, [])))))
-            nis_k = nis[code][-1][1]
-            if code in run:
-                h_k = hist[key]
-                y_now = np.atleast_1d(self.last_y).copy()
-                t_prev, last_t[key] = last_t.get(key), t
-                if (nis_k < 0 and code != VEL and key not in jump and key not in rearm and h_k
-                        and jumped(y_now, h_k[-1], R_k, t - t_prev, opt.jump_speed, gates[code])):
-                    jump[key] = (t, h_k[-1].copy())
-                held = key in jump
-                if held and nis_k < 0 and t - jump[key][0] > opt.jump_hold:
-                    # Held out long enough: the jump is the sensor's new level (a
-                    # datum that moved). Its history becomes that level, no new
-                    # jump is taken until one is accepted, and the usual
-                    # re-acquisition below takes over.
-                    recoveries.append(f"t={t:.2f} s: {SENSOR_NAMES[code]} jumped at t={jump[key][0]:.2f} s "
-                                      f"and did not come back in {opt.jump_hold:g} s; re-acquiring it")
-                    del jump[key]
-                    held = False
-                    h_k[:] = [y_now.copy() for _ in h_k]
-                    rearm.add(key)
-                h_k.append(jump[key][1].copy() if held and nis_k < 0 else y_now)
-                if len(h_k) > GATE_HISTORY:
-                    del h_k[0]
-                if held and nis_k < 0:
-                    # Held out after a jump: no re-acquisition, until it comes back or the hold ends.
-                    held_t.setdefault(SENSOR_NAMES[code], []).append(t)
-                    n_up += 1
-                    continue
-                if held:
-                    del jump[key]        # back where the state expects it: the jump is over
-                if nis_k >= 0:
-                    rearm.discard(key)
-                # The gate never locks the filter out: a run of rejections widens
-                # what the sensor sees, and the next measurement re-acquires it.
-                if nis_k < 0:
-                    run[code].append(np.atleast_1d(self.last_y).copy())
-                    if len(run[code]) >= opt.reacquire_after:
-                        blk, add = reacquire_widening(code, np.asarray(run[code]))
-                        self.P[blk, blk] += np.diag(add)
-                        recoveries.append(f"t={t:.2f} s: {len(run[code])} {SENSOR_NAMES[code]} measurements in a row "
-                                          "rejected; covariance widened to re-acquire")
-                        run[code].clear()
-                    n_up += 1
-                    continue
-                run[code].clear()
-            # Divergence watch: a running mean of each sensor's accepted NIS. One
-            # gross outlier is clipped so it cannot trip it; a sustained mismatch does.
-            ema = nis_ema[code] = 0.98 * nis_ema[code] + 0.02 * min(nis_k, nis_clip[code])
-            n_seen[code] += 1
-            if n_seen[code] > 100 and ema > opt.max_mean_nis * DOF[code]:
-                what = (f"the running mean NIS of {SENSOR_NAMES[code]} is {ema:.0f} (expected {DOF[code]})")
-                widen = watch_widening(code, np.atleast_1d(self.last_y))
-                if widen is None or len(recoveries) >= MAX_RECOVERIES:
-                    raise EstimatorDivergedError(f"EKF diverged at t={t:.3f} s: {what}; the model no longer "
-                                                 "explains the data")
-                # Recover instead of stopping: open up the states that explain
-                # this sensor's mismatch (a stall's slip, a bias jump) and go on.
-                blk, add = widen
-                self.P[blk, blk] += np.diag(add)
-                nis_ema[code], n_seen[code] = float(DOF[code]), 0
-                recoveries.append(f"t={t:.2f} s: {what}; its states' covariance widened")
-            n_up += 1
             if progress is not None and k % stride == 0:
                 progress(k, len(t_ev))
         if progress is not None:
@@ -459,17 +332,191 @@ class EKF:
         if row == 0:
             raise EstimatorDivergedError(f"EKF: no wheel measurement at or after its start (t={self.init.t:.6g} s, "
                                          f"{self.init.note}); the wheel odometry ends at t={m.wheel.t[-1]:.6g} s")
+        return self.finish(out_t[:row], out_x[:row], out_var[:row], out_pose[:row], nis, time.perf_counter() - wall0)
 
-        est = make_estimate("ekf" if opt.slip_states else "ekf-no-slip", out_t[:row], out_x[:row], out_var[:row],
-                            out_pose[:row], nis, list(m.notes) + [self.init.note], time.perf_counter() - wall0,
-                            n_up, t_switch, switch_sigma, sch.hold, self.P[SCALE_IDX, SCALE_IDX].copy(),
-                            self.init)
-        est.recoveries = recoveries
-        est.held_out = {k: np.asarray(v) for k, v in held_t.items()}
-        est.warnings += window_warn
+    def begin(self) -> None:
+        """Set up the event loop's state (the schedule's switch, the gates'
+        histories, the divergence watch). ``run`` calls it; a caller that
+        feeds ``step`` itself (odomgraph.online) calls it once first."""
+        m, r, sch, opt = self.meas, self.robot, self.schedule, self.options
+        self.t_switch = sch.switch_time(m.t_start)
+        self.switch_sigma = None
+        self._R = {GYRO: np.array([[r.gyro_sigma**2]]), VEL: np.diag(np.square(r.velocity_sigma)),
+                   RANGE: np.array([[r.range_sigma**2]])}
+        self._gates = gate_thresholds(opt)
+        self.n_up = 0
+        self._nis_ema = [float(d) for d in DOF]
+        self._nis_clip = [10.0 * opt.max_mean_nis * d for d in DOF]
+        self._n_seen = [0] * len(DOF)
+        self._run = {c: [] for c in GATED}   # innovations of the current run of rejections
+        self._hist: dict[tuple, list] = {}    # (sensor, beacon) -> its last GATE_HISTORY innovations
+        self._jump: dict[tuple, tuple] = {}   # (sensor, beacon) -> (t, innovation before) of a jump held out
+        self._last_t: dict[tuple, float] = {}  # (sensor, beacon) -> time of its previous measurement
+        self.held_t: dict[str, list] = {}     # sensor -> times of the measurements held out as a jump
+        self._rearm: set[tuple] = set()       # sensors whose hold expired: no new jump until one is accepted
+        self.recoveries: list[str] = []
+        obs = self.init.observability
+        self._pinned = bool(obs.unobservable)
+        # The schedule's window, less where the fixes say the wheels slipped (slipcheck).
+        self.slipping, self.window_warnings = in_window(self.init.slipping, m.t_start, self.t_switch)
+
+    def row(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The output row at the current time: state (11,), variances (11,)
+        and pose covariance (3, 3). Rows carry honest covariance: what pinned
+        (unobservable) scale combinations leave uncertain (observability.decondition)."""
+        obs = self.init.observability
+        Pr = self.P if not self._pinned else decondition(self.P, obs, S.SCALE, obs.prior_sigma)
+        return self.x.copy(), np.diagonal(Pr).copy(), Pr[0:3, 0:3].copy()
+
+    def step(self, t: float, code: int, z, *aux, in_slip: bool = False) -> float:
+        """Predict to t [s] and process one measurement of sensor ``code``
+        (sensors.WHEEL ...): wheels (speeds (2,) [m/s], their sigma (2,)),
+        gyro (rate (1,) [rad/s]), GPS (antenna x, y (2,) [m], sigma [m]),
+        range ((1,) [m], beacon x, y (2,) [m], beacon id) or velocity
+        ((v, omega) (2,)). ``in_slip``: t lies where the wheels slipped
+        inside the calibration window (no zero-slip pseudo-update).
+        Returns the NIS, negative when the gate rejected it."""
+        sch, opt = self.schedule, self.options
+        self.predict(t)
+        if self.switch_sigma is None and self.t_switch is not None and t >= self.t_switch:
+            # The schedule switches: from here on every update holds the scale factors.
+            self.switch_sigma = self.P[SCALE_IDX, SCALE_IDX].copy()
+            self.holding_scale = sch.hold is Hold.consider
+        x = self.x
+        gates, hist, jump = self._gates, self._hist, self._jump
+        if code == WHEEL:
+            if ((self.switch_sigma is None and self.t_switch is not None and not in_slip)
+                    or not self.init.observability.slip_observable):
+                h, H = pseudo.zero_slip(x[6], x[7])                              # eq. 35-36
+                self.update(np.zeros(2), h, H, SLIP_IDX, self._R_slip)
+            elif self.switch_sigma is not None and sch.hold is Hold.pseudo:
+                h, H = pseudo.hold_scale(x[8], x[9], x[10])                      # eq. 37-38
+                self.update(h.copy(), h, H, SCALE_IDX, self._R_scale)
+            x = self.x  # the pseudo-update has moved the state
+            h, H = encoder.wheel_speeds(x[3], x[4], x[6], x[7], x[8], x[9], x[10], self.robot.track_width)  # eq. 29-34
+            s = aux[0]
+            nis_k = self.update(z, h, H, ENC_IDX, np.diag(s * s))
+            self._check()
+        elif code == GYRO:
+            h, H = gyro.yaw_rate(x[4], x[5])                                      # eq. 10-11
+            nis_k = self.update(z, h, H, GYRO_IDX, self._R[GYRO])
+        elif code == GPS:
+            h, H = gps.antenna_position(x[0], x[1], x[2], self.robot.gps_lever_arm)   # eq. 8-9
+            sg = aux[0]
+            key = (GPS, 0)
+            R_k = np.eye(2) * sg * sg
+            # a sensor held out after a jump gets no rescue from its recent innovations (the jump's)
+            ref = None if key in jump else gate_reference(hist.setdefault(key, []))
+            nis_k = self.update(z, h, H, POSE_IDX, R_k, gates[GPS], ref)
+        elif code == RANGE:
+            h, H = ranging.beacon_range(x[0], x[1], x[2], aux[0], self.robot.range_lever_arm)   # eq. 12-16
+            key = (RANGE, aux[1])
+            R_k = self._R[RANGE]
+            ref = None if key in jump else gate_reference(hist.setdefault(key, []))
+            nis_k = self.update(z, h, H[:, :3], POSE_IDX, R_k, gates[RANGE], ref)
+        else:
+            h, H = velocity.body_velocity(x[3], x[4])                             # sec. VI-B
+            key = (VEL, 0)
+            R_k = self._R[VEL]
+            nis_k = self.update(z, h, H, VEL_IDX, R_k, gates[VEL], gate_reference(hist.setdefault(key, [])))
+        self.n_up += 1
+        if code in self._run:
+            self._gated(t, code, key, nis_k, R_k)
+        if nis_k >= 0:          # (a rejected or held-out measurement says nothing of divergence)
+            self._watch(t, code, nis_k)
+        return nis_k
+
+    def _gated(self, t: float, code: int, key: tuple, nis_k: float, R_k: np.ndarray) -> None:
+        """After a gated sensor's update: hold a jump out, end a hold that
+        lasted too long, and re-acquire after a run of rejections."""
+        opt, jump, rearm, run = self.options, self._jump, self._rearm, self._run
+        h_k = self._hist[key]
+        y_now = np.atleast_1d(self.last_y).copy()
+        t_prev, self._last_t[key] = self._last_t.get(key), t
+        if (nis_k < 0 and code != VEL and key not in jump and key not in rearm and h_k
+                and jumped(y_now, h_k[-1], R_k, t - t_prev, opt.jump_speed, self._gates[code])):
+            jump[key] = (t, h_k[-1].copy())
+        held = key in jump
+        if held and nis_k < 0 and t - jump[key][0] > opt.jump_hold:
+            # Held out long enough: the jump is the sensor's new level (a
+            # datum that moved). Its history becomes that level, no new
+            # jump is taken until one is accepted, and the usual
+            # re-acquisition below takes over.
+            self.recoveries.append(f"t={t:.2f} s: {SENSOR_NAMES[code]} jumped at t={jump[key][0]:.2f} s "
+                                   f"and did not come back in {opt.jump_hold:g} s; re-acquiring it")
+            del jump[key]
+            held = False
+            h_k[:] = [y_now.copy() for _ in h_k]
+            rearm.add(key)
+        h_k.append(jump[key][1].copy() if held and nis_k < 0 else y_now)
+        if len(h_k) > GATE_HISTORY:
+            del h_k[0]
+        if held and nis_k < 0:
+            # Held out after a jump: no re-acquisition, until it comes back or the hold ends.
+            self.held_t.setdefault(SENSOR_NAMES[code], []).append(t)
+            return
+        if held:
+            del jump[key]        # back where the state expects it: the jump is over
+        if nis_k >= 0:
+            rearm.discard(key)
+            run[code].clear()
+            return
+        # The gate never locks the filter out: a run of rejections widens
+        # what the sensor sees, and the next measurement re-acquires it.
+        run[code].append(y_now.copy())
+        if len(run[code]) >= opt.reacquire_after:
+            blk, add = reacquire_widening(code, np.asarray(run[code]))
+            self.P[blk, blk] += np.diag(add)
+            self.recoveries.append(f"t={t:.2f} s: {len(run[code])} {SENSOR_NAMES[code]} measurements in a row "
+                                   "rejected; covariance widened to re-acquire")
+            run[code].clear()
+
+    def _watch(self, t: float, code: int, nis_k: float) -> None:
+        """Divergence watch: a running mean of each sensor's accepted NIS. One
+        gross outlier is clipped so it cannot trip it; a sustained mismatch does."""
+        opt = self.options
+        ema = self._nis_ema[code] = 0.98 * self._nis_ema[code] + 0.02 * min(nis_k, self._nis_clip[code])
+        self._n_seen[code] += 1
+        if self._n_seen[code] > 100 and ema > opt.max_mean_nis * DOF[code]:
+            what = (f"the running mean NIS of {SENSOR_NAMES[code]} is {ema:.0f} (expected {DOF[code]})")
+            widen = watch_widening(code, np.atleast_1d(self.last_y))
+            if widen is None or len(self.recoveries) >= MAX_RECOVERIES:
+                raise EstimatorDivergedError(f"EKF diverged at t={t:.3f} s: {what}; the model no longer "
+                                             "explains the data")
+            # Recover instead of stopping: open up the states that explain
+            # this sensor's mismatch (a stall's slip, a bias jump) and go on.
+            blk, add = widen
+            self.P[blk, blk] += np.diag(add)
+            self._nis_ema[code], self._n_seen[code] = float(DOF[code]), 0
+            self.recoveries.append(f"t={t:.2f} s: {what}; its states' covariance widened")
+
+    def finish(self, t, x, var, pose_cov, nis: dict, wall: float) -> Estimate:
+        """The run's Estimate from its rows (t (N,), states (N, 11), variances
+        (N, 11), pose covariances (N, 3, 3)) and NIS lists (see make_estimate)."""
+        opt, m, sch = self.options, self.meas, self.schedule
+        est = make_estimate("ekf" if opt.slip_states else "ekf-no-slip", t, x, var, pose_cov, nis,
+                            list(m.notes) + [self.init.note], wall, self.n_up, self.t_switch, self.switch_sigma,
+                            sch.hold, self.P[SCALE_IDX, SCALE_IDX].copy(), self.init)
+        est.recoveries = list(self.recoveries)
+        est.held_out = {k: np.asarray(v) for k, v in self.held_t.items()}
+        est.warnings += self.window_warnings
         for k, v in m.spikes.items():
             est.rejected[k] = est.rejected.get(k, 0) + v
         return est
+
+
+def event_values(meas, code: int, i: int) -> tuple:
+    """Row i of sensor ``code`` of ``meas`` (measurements.Measurements) as
+    ``EKF.step`` takes it."""
+    if code == WHEEL:
+        return meas.wheel.m[i], meas.wheel.sigma[i]
+    if code == GYRO:
+        return (meas.gyro[1][i:i + 1],)
+    if code == GPS:
+        return meas.gps[1][i], meas.gps[2][i]
+    if code == RANGE:
+        return meas.ranges[2][i:i + 1], meas.ranges[1][i], meas.ranges_id[i]
+    return (meas.velocity[1][i],)
 
 
 def make_estimate(method: str, t, mean, var, pose_cov, nis: dict, notes: list, wall: float, n_up: int,

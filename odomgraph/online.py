@@ -1,0 +1,410 @@
+"""Live use: the estimate as each measurement arrives (issue 15).
+
+    from odomgraph.online import Online
+    live = Online(load_robot("robot.toml"), method="ekf", schedule=Schedule(calibrate_until=20.0))
+    for sensor, t, values in feed:               # in time order, or nearly (``latency``)
+        for row in live.push(sensor, t, *values):
+            publish(row)                          # an OnlineRow: t, state (11,), sigma (11,)
+    live.close()                                  # the rest, and the summary
+
+Sensors and their values are those of ../shared/spec/LOG_FORMAT.md:
+``encoders`` (ticks_left, ticks_right), ``wheel_speeds`` (v_left, v_right),
+``gps`` (x, y[, sigma]), ``gyro`` (omega), ``ranges`` (beacon id, range) and
+``velocity`` (v, omega).
+
+**Same answer as the replay.** The filter is ``estimators.ekf.EKF``, stepped
+one event at a time (``EKF.step``: the loop ``EKF.run`` runs over a whole
+log), and every measurement is read through the same cleaning
+(``measurements.from_log``: spikes, re-published fixes, a gyro at its rail,
+dropouts). That cleaning looks a few rows ahead and behind, so the live
+filter runs a little behind the newest data: it processes, in time order,
+the events that no later measurement can precede or re-judge, in chunks of
+``chunk`` seconds, over a window holding ``context`` seconds of what came
+before. What a whole log decides once (the start pose, which scale
+combinations the data determine, the slip intensity, where the wheels slipped
+inside the calibration window) is decided on the first ``warmup`` seconds:
+long enough to cover the calibration window (and the start-pose fit without
+an ``[initial]`` pose). On a log where those decisions agree with the whole
+log's, the streamed rows equal ``estimate --method ekf``'s states.csv
+(tests/test_online.py holds them to 1e-9). ``estimate`` goes on to refit
+noise scales from the whole log's residuals and re-runs; a live filter
+cannot, and uses robot.toml as given: run ``calibrate`` first, which writes
+them there.
+
+**Order.** Measurements may arrive out of order within ``latency`` seconds of
+the newest one; they are reordered. Older ones are rejected and counted.
+
+isam2 and fixed-lag are not streamed yet (their keyframe problem is built
+from a whole log); ``Online`` says so.
+"""
+from __future__ import annotations
+
+import heapq
+import math
+import os
+import pickle
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from odomgraph import state as S
+from odomgraph.errors import OdomgraphError, OptionError
+from odomgraph.estimators.ekf import EKF, EKFOptions, event_values
+from odomgraph.estimators.initial import CONSENSUS_WINDOW
+from odomgraph.estimators.measurements import from_log
+from odomgraph.estimators.registry import Method, check_option_names, parse_method
+from odomgraph.estimators.schedule import Schedule
+from odomgraph.estimators.sensors import SENSOR_NAMES, WHEEL, event_stream
+from odomgraph.estimators.slipcheck import in_stretches
+from odomgraph.io.csvtable import ORIGIN_ABOVE
+from odomgraph.io.log import Encoders, Gps, Gyro, Log, Ranges, Velocity, WheelSpeeds
+from odomgraph.io.robot import RobotConfig
+
+#: Each sensor's value names, in order (LOG_FORMAT.md columns after ``t``);
+#: gps takes an optional third, its sigma [m].
+SENSOR_VALUES = {"encoders": ("ticks_left", "ticks_right"), "wheel_speeds": ("v_left", "v_right"),
+                 "gps": ("x", "y", "sigma"), "gyro": ("omega",), "ranges": ("beacon", "range"),
+                 "velocity": ("v", "omega")}
+#: Rows ahead of an event that the cleaning reads (measurements._spikes' half window, plus one).
+AHEAD_ROWS = 4
+#: A sensor whose newest row is this much older than the newest data [s] has
+#: stopped (a dropout): the filter no longer waits for its rows ahead.
+STOPPED_AFTER = 1.0
+#: Margin [s] past the calibration window (or start-pose fit) that the warm-up adds.
+WARMUP_MARGIN = 5.0
+
+
+class StreamInputError(OdomgraphError):
+    """A measurement the stream cannot read (unknown sensor, wrong count, not a number)."""
+
+
+@dataclass(frozen=True)
+class OnlineRow:
+    """One estimate, as a states.csv row: ``t`` [s since ``t_origin``],
+    ``mean`` (11,) and ``sigma`` (11,) in state.NAMES order (m, rad, m/s,
+    rad/s, scale factors unitless), ``pose_cov`` (3, 3) of x, y, theta."""
+    t: float
+    mean: np.ndarray
+    sigma: np.ndarray
+    pose_cov: np.ndarray
+    t_origin: int = 0
+
+    def named(self) -> dict[str, float]:
+        """{state name: value, sigma_<name>: sigma}."""
+        out = {n: float(v) for n, v in zip(S.NAMES, self.mean)}
+        out.update({f"sigma_{n}": float(v) for n, v in zip(S.NAMES, self.sigma)})
+        return out
+
+
+@dataclass
+class _Counts:
+    accepted: dict[str, int] = field(default_factory=dict)
+    rejected: dict[str, int] = field(default_factory=dict)   # by the filter's gate
+    late: dict[str, int] = field(default_factory=dict)       # older than the latency window
+    repeated: dict[str, int] = field(default_factory=dict)   # a stamp the sensor sent already
+
+    @staticmethod
+    def add(d: dict, key: str, n: int = 1) -> None:
+        d[key] = d.get(key, 0) + n
+
+
+class Online:
+    """A live estimator over one robot (see the module doc).
+
+    robot: RobotConfig (io.robot.load_robot). method: "ekf" (isam2 and
+    fixed-lag are not streamed yet). schedule: as ``estimate``'s. latency
+    [s]: how far out of order measurements may arrive. warmup [s]: data
+    held before the filter starts (None: the calibration window, or the
+    start-pose fit without [initial], plus WARMUP_MARGIN; at least 2 s).
+    chunk [s]: how much new data each filter step takes. options: EKFOptions.
+    """
+
+    def __init__(self, robot: RobotConfig, method="ekf", schedule: Schedule = Schedule(), latency: float = 0.25,
+                 warmup: float | None = None, chunk: float = 0.1, context: float = 2.0, **options):
+        method = parse_method(method)
+        if method is not Method.ekf:
+            raise OptionError(f"{method.value} is not streamed yet: its keyframe problem is built from a whole log "
+                              "(estimators.batch.build_problem). Stream with --method ekf, or run "
+                              f"`odomgraph estimate --method {method.value}` on the recorded log; its online.csv "
+                              "is the causal estimate")
+        for name, v in (("latency", latency), ("chunk", chunk), ("context", context)):
+            if not (isinstance(v, (int, float)) and math.isfinite(v) and v >= 0):
+                raise OptionError(f"{name} must be seconds >= 0, got {v!r}")
+        if schedule.calibrate_until is None:
+            raise OptionError("the EKF needs a schedule: --calibrate-until none (slip and scale together) is for "
+                              "the smoothers; use a number of seconds (0 = slip only)")
+        check_option_names(options)
+        fields = EKFOptions.__dataclass_fields__
+        self.options = EKFOptions(**{k: v for k, v in options.items() if k in fields and v is not None})
+        self.robot, self.schedule, self.method = robot, schedule, method
+        self.latency, self.chunk, self.context = float(latency), max(float(chunk), 1e-6), float(context)
+        if warmup is None:
+            warmup = 2.0
+            if schedule.calibrate_until is not None:
+                warmup = max(warmup, schedule.calibrate_until + WARMUP_MARGIN)
+            if robot.initial is None:
+                warmup = max(warmup, CONSENSUS_WINDOW + WARMUP_MARGIN)
+        self.warmup = float(warmup)
+        self._beacons = {b.id: i for i, b in enumerate(robot.beacons)}
+        self._heap: list = []                          # (t, seq, sensor, values) not yet released
+        self._seq = 0
+        self._raw: dict[str, list] = {s: [] for s in SENSOR_VALUES}   # released (t, values), in time order
+        self.t_origin: int | None = None
+        self.t_newest = -math.inf                       # newest stamp pushed
+        self.t_released = -math.inf                     # every row older than this is released
+        self.t_first: float | None = None
+        self.t_done = -math.inf                         # every event before this is filtered
+        self.ekf: EKF | None = None
+        self.last: OnlineRow | None = None
+        self.counts = _Counts()
+        self.notes: list[str] = []
+        self.closed = False
+        self.lines_read = 0         # input lines consumed (odomgraph stream keeps it for --resume)
+
+    # ------------------------------------------------------------ input
+    def push(self, sensor: str, t: float, *values) -> list[OnlineRow]:
+        """One measurement at stamp t [s, the log's clock]. Returns the rows
+        that became final (none while warming up or waiting for data)."""
+        if self.closed:
+            raise OdomgraphError("push after close()")
+        vals = self._values(sensor, values)
+        t = float(t)
+        if not math.isfinite(t):
+            raise StreamInputError(f"{sensor}: time {t!r} is not a finite number")
+        if self.t_origin is None:
+            self.t_origin = int(math.floor(t)) if abs(t) >= ORIGIN_ABOVE else 0
+        t -= self.t_origin
+        if t < self.t_released:
+            _Counts.add(self.counts.late, sensor)
+            return []
+        heapq.heappush(self._heap, (t, self._seq, sensor, vals))
+        self._seq += 1
+        if t > self.t_newest:
+            self.t_newest = t
+        self._release(self.t_newest - self.latency)
+        return self._advance(final=False)
+
+    def encoders(self, t: float, ticks_left: float, ticks_right: float) -> list[OnlineRow]:
+        return self.push("encoders", t, ticks_left, ticks_right)
+
+    def wheel_speeds(self, t: float, v_left: float, v_right: float) -> list[OnlineRow]:
+        return self.push("wheel_speeds", t, v_left, v_right)
+
+    def gps(self, t: float, x: float, y: float, sigma: float | None = None) -> list[OnlineRow]:
+        return self.push("gps", t, x, y, *(() if sigma is None else (sigma,)))
+
+    def gyro(self, t: float, omega: float) -> list[OnlineRow]:
+        return self.push("gyro", t, omega)
+
+    def ranges(self, t: float, beacon: str, range_m: float) -> list[OnlineRow]:
+        return self.push("ranges", t, beacon, range_m)
+
+    def velocity(self, t: float, v: float, omega: float) -> list[OnlineRow]:
+        return self.push("velocity", t, v, omega)
+
+    def _values(self, sensor: str, values) -> tuple:
+        names = SENSOR_VALUES.get(sensor)
+        if names is None:
+            raise StreamInputError(f"unknown sensor {sensor!r}; one of {', '.join(SENSOR_VALUES)}")
+        want = (2, 3) if sensor == "gps" else (len(names),)
+        if len(values) not in want:
+            raise StreamInputError(f"{sensor}: expected {' or '.join(map(str, want))} values "
+                                   f"({', '.join(names[:max(want)])}), got {len(values)}")
+        out = []
+        for name, v in zip(names, values):
+            if sensor == "ranges" and name == "beacon":
+                key = str(v).strip()
+                if key not in self._beacons:
+                    raise StreamInputError(f"ranges: unknown beacon {key!r} (robot.toml [range].beacons has "
+                                           f"{', '.join(self._beacons) or 'none'})")
+                out.append(self._beacons[key])
+                continue
+            try:
+                f = float(v)
+            except (TypeError, ValueError):
+                raise StreamInputError(f"{sensor}: {name} {v!r} is not a number") from None
+            if not math.isfinite(f):
+                raise StreamInputError(f"{sensor}: {name} is {f!r}")
+            out.append(f)
+        if sensor == "gps" and len(out) == 3 and not out[2] > 0:
+            raise StreamInputError(f"gps: sigma must be > 0, got {out[2]!r}")
+        return tuple(out)
+
+    def _release(self, until: float) -> None:
+        """Rows older than ``until`` leave the reorder buffer for good."""
+        if until <= self.t_released:
+            return
+        self.t_released = until
+        heap, raw = self._heap, self._raw
+        while heap and heap[0][0] < until:
+            t, _, sensor, vals = heapq.heappop(heap)
+            rows = raw[sensor]
+            # a stamp sent twice (read_log drops such rows too); ranges may share stamps
+            if rows and sensor != "ranges" and t <= rows[-1][0]:
+                _Counts.add(self.counts.repeated, sensor)
+                continue
+            rows.append((t, vals))
+            if self.t_first is None or t < self.t_first:
+                self.t_first = t
+
+    # ----------------------------------------------------------- filter
+    def _log(self, t_lo: float) -> Log:
+        """The released rows from t_lo on, as a Log."""
+        def arrays(sensor):
+            rows = self._raw[sensor]
+            i = 0
+            while i < len(rows) and rows[i][0] < t_lo:
+                i += 1
+            rows = rows[i:]
+            if not rows:
+                return None
+            return np.array([r[0] for r in rows]), [np.array(c) for c in zip(*(r[1] for r in rows))]
+        kw = {}
+        if (a := arrays("encoders")) is not None:
+            kw["encoders"] = Encoders(a[0], *a[1])
+        if (a := arrays("wheel_speeds")) is not None:
+            kw["wheel_speeds"] = WheelSpeeds(a[0], *a[1])
+        if (a := arrays("gps")) is not None:
+            rows = [r for r in self._raw["gps"] if r[0] >= t_lo]
+            # fixes with and without a sigma: the configured one for those without (LOG_FORMAT)
+            sig = (None if all(len(r[1]) == 2 for r in rows)
+                   else np.array([r[1][2] if len(r[1]) == 3 else self.robot.gps_sigma for r in rows]))
+            kw["gps"] = Gps(a[0], a[1][0], a[1][1], sig)
+        if (a := arrays("gyro")) is not None:
+            kw["gyro"] = Gyro(a[0], a[1][0])
+        if (a := arrays("ranges")) is not None:
+            kw["ranges"] = Ranges(a[0], a[1][0].astype(int), a[1][1])
+        if (a := arrays("velocity")) is not None:
+            kw["velocity"] = Velocity(a[0], *a[1])
+        return Log(self.robot, **kw)
+
+    def _final_before(self) -> float:
+        """Events before this time [s] can no longer change: every row they
+        depend on, and AHEAD_ROWS rows after them, have been released."""
+        b = self.t_released
+        off = self.robot.gps_time_offset
+        if off > 0:
+            b -= off                          # a later fix is stamped late: it belongs earlier
+        for sensor in ("encoders", "wheel_speeds", "gyro"):
+            rows = self._raw[sensor]
+            if not rows or rows[-1][0] < self.t_released - STOPPED_AFTER:
+                continue
+            if len(rows) <= AHEAD_ROWS:
+                return -math.inf
+            # encoder events sit midway between two rows: the next row's event
+            # lies after the newest row, AHEAD_ROWS rows back is final
+            b = min(b, rows[-1 - AHEAD_ROWS][0])
+        return b
+
+    def _advance(self, final: bool) -> list[OnlineRow]:
+        if self.t_first is None:
+            return []
+        if self.ekf is None:
+            if not final and self.t_released < self.t_first + self.warmup:
+                return []
+            self._start()
+        b = math.inf if final else self._final_before()
+        if not final and b - self.t_done < self.chunk:
+            return []
+        return self._filter(b)
+
+    def _start(self) -> None:
+        """Warm-up done: the whole-log decisions on the rows so far (see the module doc)."""
+        log = self._log(-math.inf)
+        if log.encoders is None and log.wheel_speeds is None:
+            raise OdomgraphError(f"no encoders or wheel_speeds in the first {self.warmup:g} s of the stream: "
+                                 "nothing to estimate from")
+        self.ekf = EKF(log, self.schedule, self.options)
+        self.ekf.begin()
+        self.t_done = self.ekf.init.t
+        self.notes.append(self.ekf.init.note)
+
+    def _filter(self, b: float) -> list[OnlineRow]:
+        """Filter the events in [t_done, b)."""
+        ekf = self.ekf
+        meas = from_log(self._log(self.t_done - self.context))
+        t_ev, code_ev, row_ev = event_stream(meas, self.t_done)
+        n = int(np.searchsorted(t_ev, b, side="left"))
+        slip = in_stretches(t_ev[:n], ekf.slipping)
+        out = []
+        counts = self.counts
+        for k in range(n):
+            code = int(code_ev[k])
+            nis = ekf.step(t_ev[k], code, *event_values(meas, code, row_ev[k]), in_slip=bool(slip[k]))
+            _Counts.add(counts.accepted if nis >= 0 else counts.rejected, SENSOR_NAMES[code])
+            if code == WHEEL:
+                x, var, pc = ekf.row()
+                out.append(OnlineRow(float(t_ev[k]), x, np.sqrt(np.maximum(var, 0.0)), pc, self.t_origin or 0))
+        for note in meas.notes:
+            if note not in self.notes:
+                self.notes.append(note)
+        if out:
+            self.last = out[-1]
+        self.t_done = b
+        self._prune()
+        return out
+
+    def _prune(self) -> None:
+        """Memory stays flat: rows older than the cleaning's context go."""
+        keep_from = self.t_done - self.context
+        for sensor, rows in self._raw.items():
+            i = 0
+            while i < len(rows) - AHEAD_ROWS - 2 and rows[i][0] < keep_from:
+                i += 1
+            if i:
+                del rows[:i]
+        if self.ekf is not None:
+            # the filter's own lists of held-out times and recoveries: the counts stay, the oldest go
+            for k, v in self.ekf.held_t.items():
+                del v[:-1000]
+            del self.ekf.recoveries[:-1000]
+
+    # ----------------------------------------------------------- output
+    def estimate(self) -> OnlineRow | None:
+        """The newest estimate (None before the filter starts)."""
+        return self.last
+
+    def close(self) -> list[OnlineRow]:
+        """No more data: filter everything that is left. Returns those rows."""
+        if self.closed:
+            return []
+        self._release(math.inf)
+        out = self._advance(final=True)
+        self.closed = True
+        return out
+
+    def summary(self) -> dict:
+        """Counts, recoveries and notes so far, for a log line or summary.json."""
+        c = self.counts
+        ekf = self.ekf
+        return {"method": self.method.value, "t_origin": self.t_origin or 0, "accepted": dict(c.accepted),
+                "rejected_by_gate": dict(c.rejected), "rejected_late": dict(c.late),
+                "repeated_stamps": dict(c.repeated), "recoveries": list(ekf.recoveries) if ekf else [],
+                "warnings": list(ekf.init.warnings) + list(ekf.window_warnings) if ekf else [],
+                "notes": list(self.notes), "warmup_s": self.warmup, "latency_s": self.latency}
+
+    # ------------------------------------------------------ checkpoints
+    def save(self, path: Path | str) -> None:
+        """Checkpoint: everything needed to go on as if never stopped,
+        written atomically (a crash mid-write leaves the previous one)."""
+        path = Path(path)
+        tmp = path.with_name(path.name + ".tmp")
+        with open(tmp, "wb") as f:
+            pickle.dump({"format": "odomgraph-online-1", "online": self}, f, protocol=pickle.HIGHEST_PROTOCOL)
+        os.replace(tmp, path)
+
+    @staticmethod
+    def load(path: Path | str) -> "Online":
+        """An Online from ``save``'s checkpoint."""
+        path = Path(path)
+        try:
+            with open(path, "rb") as f:
+                data = pickle.load(f)
+        except FileNotFoundError:
+            raise OdomgraphError(f"{path}: no such checkpoint") from None
+        except Exception as exc:   # a truncated or foreign file
+            raise OdomgraphError(f"{path}: not an odomgraph checkpoint ({type(exc).__name__})") from None
+        if not isinstance(data, dict) or data.get("format") != "odomgraph-online-1":
+            raise OdomgraphError(f"{path}: not an odomgraph checkpoint")
+        return data["online"]

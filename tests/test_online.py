@@ -1,0 +1,206 @@
+"""Live use (odomgraph.online, odomgraph stream): the streamed rows equal the
+replay's, reordering inside the latency window changes nothing, older data
+is rejected and counted, and a resumed stream equals one that never stopped."""
+import random
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from odomgraph.errors import OptionError
+from odomgraph.estimators.schedule import Schedule
+from odomgraph.io.log import read_log, write_log
+from odomgraph.io.stream import HEADER, log_lines, parse_line
+from odomgraph.online import Online, StreamInputError
+from odomgraph.pipeline import estimate
+from odomgraph.sim.faults import Faults, Stall, inject
+from odomgraph.sim.scenarios import paper, yard
+from odomgraph.sim.simulate import simulate
+
+
+def _stream(log, sch, lines=None, **kw):
+    live = Online(log.robot, "ekf", sch, **kw)
+    rows = []
+    for line in (lines if lines is not None else log_lines(log)):
+        sensor, t, values = parse_line(line)
+        rows += live.push(sensor, float(t), *values)
+    rows += live.close()
+    return live, rows
+
+
+def _assert_rows_equal(rows, est, tol=1e-9):
+    t = np.array([r.t for r in rows])
+    assert len(t) == len(est.t)
+    np.testing.assert_allclose(t, est.t, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(np.array([r.mean for r in rows]), est.mean, rtol=tol, atol=tol)
+    np.testing.assert_allclose(np.array([r.sigma for r in rows]), est.sigma, rtol=tol, atol=tol)
+
+
+def _rated(sc, **rates):
+    """The scenario with these sensor rates [Hz] (sim.scenarios.Rates fields)."""
+    from dataclasses import replace
+    return replace(sc, rates=replace(sc.rates, **rates))
+
+
+LOGS = {
+    # other seeds, rates and geometry than the shipped files; no [initial] pose
+    "paper seed 4": lambda: simulate(paper(60), 4),
+    "yard, gyro 100 Hz, ranges": lambda: simulate(_rated(yard(70), gyro=100.0, ranges=2.0), 5),
+    "paper, enc 20 Hz, gyro 20 Hz, gps 10 Hz": lambda: simulate(_rated(paper(60), encoders=20.0, gyro=20.0,
+                                                                       gps=10.0), 6),
+    "paper, 10 % outliers": lambda: inject(paper(60), Faults(outlier_rate=0.1, outlier_size=5.0), 7),
+    "yard, stall": lambda: inject(yard(80), Faults(stalls=(Stall(30.0, 40.0),)), 8),
+}
+
+
+@pytest.mark.parametrize("name", list(LOGS))
+def test_stream_equals_the_replay(name):
+    log = LOGS[name]()
+    sch = Schedule(calibrate_until=20.0)
+    est = estimate(log, "ekf", sch)
+    live, rows = _stream(log, sch)
+    _assert_rows_equal(rows, est)
+    # what the filter's gate rejected is counted the same
+    assert live.summary()["rejected_by_gate"] == est.rejected
+
+
+def test_stream_equals_the_replay_on_real_mocap():
+    from odomgraph.io.importers.optiodom import import_optiodom
+    from tests.test_importers import OPTI
+    log = import_optiodom(OPTI, fixes_hz=1.0)   # the shipped OptiOdom run, 1 Hz fixes
+    sch = Schedule(calibrate_until=20.0)
+    _assert_rows_equal(_stream(log, sch)[1], estimate(log, "ekf", sch))
+
+
+def test_reordering_inside_the_window_changes_nothing():
+    log = simulate(yard(50), 9)
+    sch = Schedule(calibrate_until=20.0)
+    lines = list(log_lines(log))
+    _, ref = _stream(log, sch)
+    # every line moved by up to 0.15 s of its neighbours, inside the 0.25 s window
+    rng = random.Random(3)
+    key = [float(parse_line(ln)[1]) + rng.uniform(0.0, 0.15) for ln in lines]
+    shuffled = [ln for _, ln in sorted(zip(key, lines), key=lambda p: p[0])]
+    assert shuffled != lines
+    live, rows = _stream(log, sch, shuffled)
+    assert sum(live.summary()["rejected_late"].values()) == 0
+    assert len(rows) == len(ref)
+    assert all(np.array_equal(a.mean, b.mean) and np.array_equal(a.sigma, b.sigma) for a, b in zip(rows, ref))
+
+
+def test_data_older_than_the_window_is_rejected_and_counted():
+    log = simulate(paper(40), 10)
+    sch = Schedule(calibrate_until=20.0)
+    lines = list(log_lines(log))
+    gps = [i for i, ln in enumerate(lines) if ln.startswith("gps,")]
+    late = gps[len(gps) // 2]
+    moved = lines[:late] + lines[late + 1:]
+    t_late = float(parse_line(lines[late])[1])
+    # arrives 1 s after its stamp: older than the 0.25 s window
+    at = next(i for i, ln in enumerate(moved) if float(parse_line(ln)[1]) > t_late + 1.0)
+    moved.insert(at, lines[late])
+    live, rows = _stream(log, sch, moved)
+    assert live.summary()["rejected_late"] == {"gps": 1}
+    # the same as a log without that fix
+    _, without = _stream(log, sch, lines[:late] + lines[late + 1:])
+    assert all(np.array_equal(a.mean, b.mean) for a, b in zip(rows, without)) and len(rows) == len(without)
+
+
+def test_resumed_from_a_checkpoint_equals_the_uninterrupted_run(tmp_path):
+    log = simulate(yard(60), 11)
+    sch = Schedule(calibrate_until=20.0)
+    lines = list(log_lines(log))
+    _, ref = _stream(log, sch)
+    live = Online(log.robot, "ekf", sch)
+    first = []
+    cut = int(0.6 * len(lines))            # well after the warm-up
+    for line in lines[:cut]:
+        s, t, v = parse_line(line)
+        first += live.push(s, float(t), *v)
+    live.save(tmp_path / "ck.pkl")
+    del live
+    back = Online.load(tmp_path / "ck.pkl")
+    rest = []
+    for line in lines[cut:]:
+        s, t, v = parse_line(line)
+        rest += back.push(s, float(t), *v)
+    rest += back.close()
+    rows = first + rest
+    assert len(first) > 1000 and len(rows) == len(ref)
+    assert all(np.array_equal(a.mean, b.mean) and np.array_equal(a.sigma, b.sigma) for a, b in zip(rows, ref))
+
+
+def test_bad_values_are_refused_with_a_reason():
+    log = simulate(paper(5), 1)
+    live = Online(log.robot, "ekf", Schedule(calibrate_until=20.0))
+    for args, what in ((("lidar", 0.1, 1), "unknown sensor"), (("gps", 0.1, 1.0), "expected 2 or 3"),
+                       (("gyro", 0.1, "nan"), "is nan"), (("gyro", 0.1, "fast"), "not a number"),
+                       (("ranges", 0.1, "Z", 3.0), "unknown beacon"), (("gyro", float("inf"), 0.1), "finite")):
+        with pytest.raises(StreamInputError, match=what):
+            live.push(*args)
+
+
+def test_smoothers_are_not_streamed_yet_and_say_so():
+    log = simulate(paper(5), 1)
+    with pytest.raises(OptionError, match="not streamed yet"):
+        Online(log.robot, "isam2")
+
+
+# --------------------------------------------------------------- the command
+def _cli(*args, stdin=None):
+    return subprocess.run([sys.executable, "-m", "odomgraph", *map(str, args)], input=stdin, capture_output=True,
+                          text=True, timeout=300)
+
+
+@pytest.fixture(scope="module")
+def streamed(tmp_path_factory):
+    d = tmp_path_factory.mktemp("stream")
+    log = simulate(_rated(yard(50), ranges=1.0), 12)
+    write_log(log, d / "log")
+    r = _cli("-q", "estimate", d / "log", "--method", "ekf", "-o", d / "est")
+    assert r.returncode == 0, r.stderr
+    return d, (d / "est" / "states.csv").read_text()
+
+
+def test_stream_replay_writes_exactly_states_csv(streamed):
+    d, states = streamed
+    r = _cli("stream", "--replay", d / "log")
+    assert r.returncode == 0, r.stderr
+    assert r.stdout == states
+    assert "rows written" in r.stderr and "Traceback" not in r.stderr
+
+
+def test_stream_on_stdin_with_a_bad_line(streamed):
+    d, states = streamed
+    lines = list(log_lines(read_log(d / "log")))
+    lines.insert(100, "gps,12.5,oops")
+    r = _cli("stream", "--robot", d / "log" / "robot.toml", stdin="\ufeff" + "\n".join(lines) + "\n")
+    assert r.returncode == 0, r.stderr
+    assert r.stdout == states
+    assert "stdin:101: gps: expected 2 or 3 values" in r.stderr
+    assert r.stdout.splitlines()[0] == HEADER
+
+
+def test_stream_resumes_from_its_checkpoint(streamed, tmp_path):
+    d, states = streamed
+    lines = list(log_lines(read_log(d / "log")))
+    ck = tmp_path / "ck"
+    half = "\n".join(lines[: len(lines) // 2]) + "\n"
+    r1 = _cli("stream", "--robot", d / "log" / "robot.toml", "--checkpoint", ck, "--checkpoint-every", "5",
+              stdin=half)
+    assert r1.returncode == 0 and ck.exists(), r1.stderr
+    r2 = _cli("stream", "--replay", d / "log", "--resume", ck)
+    assert r2.returncode == 0, r2.stderr
+    resumed = r2.stdout.splitlines()[1:]
+    full = states.splitlines()
+    assert len(resumed) > 100
+    # the resumed rows are the uninterrupted run's last rows, exactly
+    assert resumed == full[len(full) - len(resumed):]
+
+
+def test_stream_refuses_the_smoothers_in_one_line(streamed):
+    d, _ = streamed
+    r = _cli("stream", "--replay", d / "log", "--method", "isam2")
+    assert r.returncode == 1
+    assert r.stderr.startswith("odomgraph: error: isam2 is not streamed yet") and "Traceback" not in r.stderr
