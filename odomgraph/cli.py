@@ -731,14 +731,20 @@ def calibrate(
 def stream(
     robot: Annotated[Optional[Path], typer.Option(
         help="robot.toml of the robot (default: the replayed log's).")] = None,
-    method: Annotated[MethodName, typer.Option(help="Estimator (ekf; isam2 and fixed-lag are not streamed yet).")]
-    = MethodName.ekf,
+    method: Annotated[MethodName, typer.Option(
+        help="Estimator: ekf (a row per encoder row), isam2 (its causal row per keyframe, as online.csv), "
+             "fixed-lag (a row per keyframe as it leaves the lag window).")] = MethodName.ekf,
     calibrate_until: Annotated[str, typer.Option(
         help="Seconds from the first measurement to estimate scale factors with slip forced to 0 (as estimate).")]
     = "20",
     hold: Annotated[HoldName, typer.Option(help="How the scale factors are held after calibration (as estimate).")]
     = HoldName.consider,
     gate: Annotated[Optional[float], typer.Option(help="EKF: NIS gate on GPS, range and velocity (as estimate).")]
+    = None,
+    keyframe_hz: Annotated[Optional[float], typer.Option(help="Smoothers: keyframe rate [Hz] (default 5).")] = None,
+    lag: Annotated[Optional[float], typer.Option(help="fixed-lag: window length [s] (default 5).")] = None,
+    history: Annotated[Optional[Path], typer.Option(
+        help="Smoothers: at the end, write the fully smoothed states of the whole stream to this states.csv.")]
     = None,
     rate: Annotated[Optional[float], typer.Option(
         min=1e-6, max=1000.0, help="Write at most one row per 1/rate seconds [Hz] (default: every encoder row).")]
@@ -777,7 +783,8 @@ def stream(
         if robot is None and replay is None:
             raise _click_exc.UsageError("give --robot robot.toml (or --replay LOG, whose robot.toml is used)")
         live = Online(load_robot(robot if robot is not None else replay / "robot.toml"), method.value,
-                      _parse_schedule(calibrate_until, hold), latency=latency, warmup=warmup, gate=gate)
+                      _parse_schedule(calibrate_until, hold), latency=latency, warmup=warmup,
+                      journal=checkpoint is not None, gate=gate, keyframe_hz=keyframe_hz, lag=lag)
     if replay is not None:
         from odomgraph.io.log import read_log
         from odomgraph.io.stream import log_lines
@@ -789,6 +796,13 @@ def stream(
                     skip_lines=live.lines_read if (resume is not None and replay is not None) else 0)
     for line in summary_lines(live, st):
         typer.echo(f"odomgraph: {line}", err=True)
+    if history is not None:
+        if live.final is None:
+            raise _click_exc.UsageError("--history: only isam2 and fixed-lag smooth the whole stream")
+        from odomgraph.io.estimate import write_states
+        live.final.t_origin = live.t_origin or 0
+        write_states(history, live.final)
+        typer.echo(f"odomgraph: wrote the smoothed history to {history}", err=True)
 
 
 @app.command("import")

@@ -34,8 +34,13 @@ them there.
 **Order.** Measurements may arrive out of order within ``latency`` seconds of
 the newest one; they are reordered. Older ones are rejected and counted.
 
-isam2 and fixed-lag are not streamed yet (their keyframe problem is built
-from a whole log); ``Online`` says so.
+**The smoothers.** isam2 and fixed-lag step their runners
+(estimators.incremental) one keyframe at a time over a problem that grows as
+the data arrive (estimators.growing). isam2 writes its causal row of each
+keyframe interval (``online.csv`` of ``estimate --method isam2``) once the
+next keyframe is known; fixed-lag writes each keyframe's row when it leaves
+the lag window (states.csv of ``estimate --method fixed-lag``). ``close``
+keeps the isam2 run's fully smoothed estimate in ``final``.
 """
 from __future__ import annotations
 
@@ -50,10 +55,10 @@ import numpy as np
 
 from odomgraph import state as S
 from odomgraph.errors import OdomgraphError, OptionError
-from odomgraph.estimators.ekf import EKF, EKFOptions, event_values
+from odomgraph.estimators.ekf import EKF, event_values
 from odomgraph.estimators.initial import CONSENSUS_WINDOW
 from odomgraph.estimators.measurements import from_log
-from odomgraph.estimators.registry import Method, check_option_names, parse_method
+from odomgraph.estimators.registry import REGISTRY, Method, check_option_names, parse_method
 from odomgraph.estimators.schedule import Schedule
 from odomgraph.estimators.sensors import SENSOR_NAMES, WHEEL, event_stream
 from odomgraph.estimators.slipcheck import in_stretches
@@ -112,31 +117,33 @@ class _Counts:
 class Online:
     """A live estimator over one robot (see the module doc).
 
-    robot: RobotConfig (io.robot.load_robot). method: "ekf" (isam2 and
-    fixed-lag are not streamed yet). schedule: as ``estimate``'s. latency
+    robot: RobotConfig (io.robot.load_robot). method: "ekf", "isam2" or
+    "fixed-lag". schedule: as ``estimate``'s. latency
     [s]: how far out of order measurements may arrive. warmup [s]: data
     held before the filter starts (None: the calibration window, or the
     start-pose fit without [initial], plus WARMUP_MARGIN; at least 2 s).
-    chunk [s]: how much new data each filter step takes. options: EKFOptions.
+    chunk [s]: how much new data each EKF step takes. options: the
+    method's options (EKFOptions, IncrementalOptions), as ``estimate``'s.
     """
 
     def __init__(self, robot: RobotConfig, method="ekf", schedule: Schedule = Schedule(), latency: float = 0.25,
-                 warmup: float | None = None, chunk: float = 0.1, context: float = 2.0, **options):
+                 warmup: float | None = None, chunk: float = 0.1, context: float = 2.0, journal: bool = False,
+                 **options):
+        self._args = dict(robot=robot, method=method, schedule=schedule, latency=latency, warmup=warmup, chunk=chunk,
+                          context=context, journal=journal, **options)
         method = parse_method(method)
-        if method is not Method.ekf:
-            raise OptionError(f"{method.value} is not streamed yet: its keyframe problem is built from a whole log "
-                              "(estimators.batch.build_problem). Stream with --method ekf, or run "
-                              f"`odomgraph estimate --method {method.value}` on the recorded log; its online.csv "
-                              "is the causal estimate")
+        if method is Method.batch:
+            raise OptionError("batch smooths a whole log and cannot stream; stream with --method isam2, "
+                              "fixed-lag or ekf")
         for name, v in (("latency", latency), ("chunk", chunk), ("context", context)):
             if not (isinstance(v, (int, float)) and math.isfinite(v) and v >= 0):
                 raise OptionError(f"{name} must be seconds >= 0, got {v!r}")
-        if schedule.calibrate_until is None:
+        if method is Method.ekf and schedule.calibrate_until is None:
             raise OptionError("the EKF needs a schedule: --calibrate-until none (slip and scale together) is for "
                               "the smoothers; use a number of seconds (0 = slip only)")
         check_option_names(options)
-        fields = EKFOptions.__dataclass_fields__
-        self.options = EKFOptions(**{k: v for k, v in options.items() if k in fields and v is not None})
+        cls = REGISTRY[method].options_type()
+        self.options = cls(**{k: v for k, v in options.items() if k in cls.__dataclass_fields__ and v is not None})
         self.robot, self.schedule, self.method = robot, schedule, method
         self.latency, self.chunk, self.context = float(latency), max(float(chunk), 1e-6), float(context)
         if warmup is None:
@@ -156,11 +163,17 @@ class Online:
         self.t_first: float | None = None
         self.t_done = -math.inf                         # every event before this is filtered
         self.ekf: EKF | None = None
+        self.smoother: _Smoother | None = None
+        self.final = None            # isam2: the fully smoothed Estimate, after close()
+        self._wheel_rows = 0         # wheel rows released so far (the keyframes are every step-th)
         self.last: OnlineRow | None = None
         self.counts = _Counts()
         self.notes: list[str] = []
         self.closed = False
         self.lines_read = 0         # input lines consumed (odomgraph stream keeps it for --resume)
+        # A smoother's GTSAM state cannot be pickled: its checkpoint is every
+        # measurement pushed so far, replayed on load (deterministic, so equal).
+        self.journal: list | None = [] if journal else None
 
     # ------------------------------------------------------------ input
     def push(self, sensor: str, t: float, *values) -> list[OnlineRow]:
@@ -169,6 +182,8 @@ class Online:
         if self.closed:
             raise OdomgraphError("push after close()")
         vals = self._values(sensor, values)
+        if self.journal is not None:
+            self.journal.append((sensor, t, values))
         t = float(t)
         if not math.isfinite(t):
             raise StreamInputError(f"{sensor}: time {t!r} is not a finite number")
@@ -247,6 +262,10 @@ class Online:
             rows.append((t, vals))
             if self.t_first is None or t < self.t_first:
                 self.t_first = t
+            if sensor in ("encoders", "wheel_speeds"):
+                if self.smoother is not None:
+                    self.smoother.wheel_row(self._wheel_rows, t)
+                self._wheel_rows += 1
 
     # ----------------------------------------------------------- filter
     def _log(self, t_lo: float) -> Log:
@@ -300,14 +319,21 @@ class Online:
     def _advance(self, final: bool) -> list[OnlineRow]:
         if self.t_first is None:
             return []
-        if self.ekf is None:
+        if self.ekf is None and self.smoother is None:
             if not final and self.t_released < self.t_first + self.warmup:
                 return []
             self._start()
         b = math.inf if final else self._final_before()
-        if not final and b - self.t_done < self.chunk:
+        if self.smoother is not None:
+            out = self.smoother.feed(self, b, final)
+        elif not final and b - self.t_done < self.chunk:
             return []
-        return self._filter(b)
+        else:
+            out = self._filter(b)
+        if out:
+            self.last = out[-1]
+        self._prune()
+        return out
 
     def _start(self) -> None:
         """Warm-up done: the whole-log decisions on the rows so far (see the module doc)."""
@@ -315,6 +341,9 @@ class Online:
         if log.encoders is None and log.wheel_speeds is None:
             raise OdomgraphError(f"no encoders or wheel_speeds in the first {self.warmup:g} s of the stream: "
                                  "nothing to estimate from")
+        if self.method is not Method.ekf:
+            self.smoother = _Smoother(self, log)
+            return
         self.ekf = EKF(log, self.schedule, self.options)
         self.ekf.begin()
         self.t_done = self.ekf.init.t
@@ -339,15 +368,12 @@ class Online:
         for note in meas.notes:
             if note not in self.notes:
                 self.notes.append(note)
-        if out:
-            self.last = out[-1]
         self.t_done = b
-        self._prune()
         return out
 
     def _prune(self) -> None:
         """Memory stays flat: rows older than the cleaning's context go."""
-        keep_from = self.t_done - self.context
+        keep_from = (self.smoother.keep_from(self) if self.smoother is not None else self.t_done) - self.context
         for sensor, rows in self._raw.items():
             i = 0
             while i < len(rows) - AHEAD_ROWS - 2 and rows[i][0] < keep_from:
@@ -377,11 +403,21 @@ class Online:
     def summary(self) -> dict:
         """Counts, recoveries and notes so far, for a log line or summary.json."""
         c = self.counts
-        ekf = self.ekf
-        return {"method": self.method.value, "t_origin": self.t_origin or 0, "accepted": dict(c.accepted),
-                "rejected_by_gate": dict(c.rejected), "rejected_late": dict(c.late),
-                "repeated_stamps": dict(c.repeated), "recoveries": list(ekf.recoveries) if ekf else [],
-                "warnings": list(ekf.init.warnings) + list(ekf.window_warnings) if ekf else [],
+        eng = self.ekf if self.ekf is not None else (self.smoother.runner if self.smoother is not None else None)
+        rejected = dict(c.rejected) if self.smoother is None else dict(self.smoother.runner.graph.gated)
+        warnings = []
+        if self.ekf is not None:
+            warnings = list(self.ekf.init.warnings) + list(self.ekf.window_warnings)
+        elif self.smoother is not None:
+            warnings = list(self.smoother.runner.prob.init.warnings)
+        accepted = dict(c.accepted)
+        if self.smoother is not None:
+            from odomgraph.estimators.batch import measurement_counts
+            accepted = measurement_counts(self.smoother.runner.prob)
+        return {"method": self.method.value, "t_origin": self.t_origin or 0, "accepted": accepted,
+                "rejected_by_gate": rejected, "rejected_late": dict(c.late),
+                "repeated_stamps": dict(c.repeated), "recoveries": list(eng.recoveries) if eng else [],
+                "warnings": warnings,
                 "notes": list(self.notes), "warmup_s": self.warmup, "latency_s": self.latency}
 
     # ------------------------------------------------------ checkpoints
@@ -389,9 +425,17 @@ class Online:
         """Checkpoint: everything needed to go on as if never stopped,
         written atomically (a crash mid-write leaves the previous one)."""
         path = Path(path)
+        if self.method is Method.ekf:
+            data = {"format": "odomgraph-online-1", "online": self}
+        elif self.journal is None:
+            raise OdomgraphError(f"{self.method.value}: a checkpoint replays the measurements so far; make the "
+                                 "Online with journal=True")
+        else:
+            data = {"format": "odomgraph-online-1", "args": self._args, "journal": self.journal,
+                    "lines_read": self.lines_read}
         tmp = path.with_name(path.name + ".tmp")
         with open(tmp, "wb") as f:
-            pickle.dump({"format": "odomgraph-online-1", "online": self}, f, protocol=pickle.HIGHEST_PROTOCOL)
+            pickle.dump(data, f, protocol=pickle.HIGHEST_PROTOCOL)
         os.replace(tmp, path)
 
     @staticmethod
@@ -407,4 +451,123 @@ class Online:
             raise OdomgraphError(f"{path}: not an odomgraph checkpoint ({type(exc).__name__})") from None
         if not isinstance(data, dict) or data.get("format") != "odomgraph-online-1":
             raise OdomgraphError(f"{path}: not an odomgraph checkpoint")
-        return data["online"]
+        if "online" in data:
+            return data["online"]
+        live = Online(**data["args"])
+        for sensor, t, values in data["journal"]:
+            live.push(sensor, t, *values)
+        live.lines_read = data["lines_read"]
+        return live
+
+
+class _Smoother:
+    """isam2 or fixed-lag, one keyframe at a time (see the module doc)."""
+
+    def __init__(self, online: Online, log: Log):
+        from odomgraph.estimators.batch import build_problem
+        from odomgraph.estimators.growing import GrowingProblem
+        from odomgraph.estimators.incremental import FixedLagRunner, ISAM2Runner
+        from odomgraph.estimators.keyframes import keyframe_step
+        opt, sch = online.options, online.schedule
+        self.isam2 = online.method is Method.isam2
+        wheel = log.encoders if log.encoders is not None else log.wheel_speeds
+        self.step = keyframe_step(wheel.t, opt.keyframe_hz)
+        prob = build_problem(log, sch, opt, causal=True)
+        self.first = int(np.searchsorted(wheel.t, prob.init.t, side="left"))
+        # the keyframes of the whole log are every step-th wheel row from `first` on
+        self.kf_times = [float(t) for t in wheel.t[self.first::self.step]]
+        self.t_start = min(float(s.t[0]) for s in log.sensors() if len(s.t))
+        b = online._final_before()
+        # final: interval j ends at t_{j+1} < b, and keyframe j+2 is one of the log's
+        m = 0
+        while m + 2 < len(self.kf_times) and self.kf_times[m + 1] < b and m + 1 < prob.kf.n - 1:
+            m += 1
+        if m < 2:
+            from odomgraph.errors import NotEnoughDataError
+            raise NotEnoughDataError(f"{online.method.value}: fewer than 3 keyframes in the warm-up "
+                                     f"({online.warmup:g} s); give a longer --warmup")
+        cut, t_next = GrowingProblem.cut(prob, m)
+        cls = ISAM2Runner if self.isam2 else FixedLagRunner
+        self.runner = r = cls(log, sch, opt, prob=cut)
+        r.last_k = math.inf             # a stream's last keyframe is known when it ends
+        self.grow = GrowingProblem([r.prob, r.graph.lin_prob, r.graph.lin_first], t_next, sch, self.step,
+                                   opt.keyframe_hz)
+        online.notes.append(prob.init.note)
+        self.wall0 = __import__("time").perf_counter()
+        self._emitted = 0               # fixed-lag: keyframes whose row was written
+        r.begin()
+        self.pending = list(range(1, m + 1))    # keyframes to advance to
+
+    def wheel_row(self, i: int, t: float) -> None:
+        """Wheel row i (of the whole stream) was released at t [s]."""
+        if i > self.first + (len(self.kf_times) - 1) * self.step and (i - self.first) % self.step == 0:
+            self.kf_times.append(t)
+
+    def keep_from(self, online: Online) -> float:
+        """The oldest time [s] a later window reads."""
+        from odomgraph.estimators.growing import WINDOW_BACK
+        j = self.runner.prob.kf.n - 1              # the next interval to append
+        return self.kf_times[max(j - WINDOW_BACK, 0)]
+
+    def feed(self, online: Online, b: float, final: bool) -> list[OnlineRow]:
+        """Append every interval that is final before b, advance, and return the new rows."""
+        from odomgraph.estimators.growing import WINDOW_BACK, window_piece
+        r, kt = self.runner, self.kf_times
+        if final:
+            wheel = online._raw["encoders"] or online._raw["wheel_speeds"]
+            if wheel and wheel[-1][0] > kt[-1]:
+                kt = kt + [wheel[-1][0]]        # the whole log's last keyframe: its last wheel row
+        j0 = r.prob.kf.n - 1                     # intervals j0.. are not in the problem yet
+        j1 = j0
+        while j1 + 1 < len(kt) and (final or (j1 + 2 < len(kt) and kt[j1 + 1] < b)):
+            j1 += 1
+        if j1 > j0:
+            w0 = max(j0 - WINDOW_BACK, 0)
+            piece = window_piece(online._log(kt[w0] - online.context), kt[w0], kt[j1], r.options.keyframe_hz,
+                                 self.step)
+            for j in range(j0, j1):
+                t_next = kt[j + 2] if j + 2 < len(kt) else kt[j + 1]
+                self.grow.append(piece, j - w0, t_next, self.t_start)
+            self.pending += list(range(j0 + 1, j1 + 1))
+        if final:
+            r.last_k = r.prob.kf.n - 1
+        out = []
+        for k in self.pending:
+            r.advance(k)
+            if self.isam2:
+                out.append(self._online_row(k, online))
+        self.pending = []
+        if not self.isam2:
+            out += self._harvested(online, final)
+        if final:
+            r.trim()
+            self.final = r.finish(self.wall0)
+            online.final = self.final
+        return out
+
+    def _online_row(self, k: int, online: Online) -> OnlineRow:
+        r = self.runner
+        t = r.prob.kf.t
+        return OnlineRow(float(t[k - 1] + 0.5 * (t[k] - t[k - 1])), r.online[k].copy(), r.online_sigma[k].copy(),
+                         None, online.t_origin or 0)
+
+    def _harvested(self, online: Online, final: bool) -> list[OnlineRow]:
+        """fixed-lag: the rows of the keyframes that left the window (all, at the end)."""
+        from odomgraph.estimators.batch import honest_blocks, keyframe_rows
+        r = self.runner
+        n = r.prob.kf.n
+        if final:
+            est = r.smoother.calculateEstimate()
+            for j in np.nonzero(~r.done[:n])[0]:
+                r._harvest(int(j), est)
+        k1 = self._emitted
+        while k1 < n - 1 and r.done[k1]:        # row k describes interval k: keyframe k's final state
+            k1 += 1
+        if k1 <= self._emitted:
+            return []
+        # (honest_blocks is the identity unless scale combinations are pinned)
+        rows = keyframe_rows(r.prob, r.pose[:n], r.W[:n], honest_blocks(r.prob, r.Sig[:n]), r.method,
+                             slice(self._emitted, k1))
+        self._emitted = k1
+        return [OnlineRow(float(rows.t[i]), rows.mean[i], rows.sigma[i], rows.pose_cov[i], online.t_origin or 0)
+                for i in range(len(rows.t))]

@@ -19,8 +19,8 @@ from odomgraph.sim.scenarios import paper, yard
 from odomgraph.sim.simulate import simulate
 
 
-def _stream(log, sch, lines=None, **kw):
-    live = Online(log.robot, "ekf", sch, **kw)
+def _stream(log, sch, lines=None, method="ekf", **kw):
+    live = Online(log.robot, method, sch, **kw)
     rows = []
     for line in (lines if lines is not None else log_lines(log)):
         sensor, t, values = parse_line(line)
@@ -141,10 +141,61 @@ def test_bad_values_are_refused_with_a_reason():
             live.push(*args)
 
 
-def test_smoothers_are_not_streamed_yet_and_say_so():
+SMOOTHER_LOGS = {
+    "paper seed 13": lambda: simulate(paper(60), 13),
+    "yard, stall (recoveries)": lambda: inject(yard(80), Faults(stalls=(Stall(30.0, 40.0),)), 14),
+    # past isam2's 300 s segment: a hand-over inside the stream
+    "yard 330 s, gyro 100 Hz": lambda: simulate(_rated(yard(330), gyro=100.0), 15),
+}
+
+
+@pytest.mark.parametrize("method", ["isam2", "fixed-lag"])
+@pytest.mark.parametrize("name", list(SMOOTHER_LOGS))
+def test_streamed_smoothers_equal_their_replay(name, method):
+    """isam2's rows are online.csv's, fixed-lag's are states.csv's, and
+    isam2's smoothed history at the end is states.csv's."""
+    if name.startswith("yard 330") and method == "fixed-lag":
+        pytest.skip("one long case is enough: the segment hand-over is isam2's")
+    log = SMOOTHER_LOGS[name]()
+    sch = Schedule(calibrate_until=20.0)
+    est = estimate(log, method, sch)
+    live, rows = _stream(log, sch, method=method)
+    _assert_rows_equal(rows, est.online if method == "isam2" else est)
+    assert live.summary()["recoveries"] == est.recoveries
+    np.testing.assert_allclose(live.final.mean, est.mean, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(live.final.sigma, est.sigma, rtol=0, atol=1e-9)
+
+
+def test_batch_cannot_stream_and_says_so():
     log = simulate(paper(5), 1)
-    with pytest.raises(OptionError, match="not streamed yet"):
-        Online(log.robot, "isam2")
+    with pytest.raises(OptionError, match="cannot stream"):
+        Online(log.robot, "batch")
+
+
+def test_a_smoother_resumes_from_its_checkpoint(tmp_path):
+    log = simulate(paper(60), 16)
+    sch = Schedule(calibrate_until=20.0)
+    lines = list(log_lines(log))
+    _, ref = _stream(log, sch, method="isam2")
+    live = Online(log.robot, "isam2", sch, journal=True)
+    first = []
+    cut = int(0.7 * len(lines))
+    for line in lines[:cut]:
+        s, t, v = parse_line(line)
+        first += live.push(s, float(t), *v)
+    live.save(tmp_path / "ck")
+    back = Online.load(tmp_path / "ck")
+    rest = []
+    for line in lines[cut:]:
+        s, t, v = parse_line(line)
+        rest += back.push(s, float(t), *v)
+    rest += back.close()
+    rows = first + rest
+    assert len(first) > 150 and len(rows) == len(ref)
+    assert all(np.array_equal(a.mean, b.mean) and np.array_equal(a.sigma, b.sigma) for a, b in zip(rows, ref))
+    without = Online(log.robot, "isam2", sch)
+    with pytest.raises(Exception, match="journal=True"):
+        without.save(tmp_path / "ck2")
 
 
 # --------------------------------------------------------------- the command
@@ -199,8 +250,23 @@ def test_stream_resumes_from_its_checkpoint(streamed, tmp_path):
     assert resumed == full[len(full) - len(resumed):]
 
 
-def test_stream_refuses_the_smoothers_in_one_line(streamed):
+def test_stream_isam2_writes_online_csv_and_its_history(streamed, tmp_path):
     d, _ = streamed
-    r = _cli("stream", "--replay", d / "log", "--method", "isam2")
+    r = _cli("-q", "estimate", d / "log", "--method", "isam2", "-o", tmp_path / "est")
+    assert r.returncode == 0, r.stderr
+    r = _cli("stream", "--replay", d / "log", "--method", "isam2", "--history", tmp_path / "hist.csv")
+    assert r.returncode == 0, r.stderr
+    got = np.loadtxt(r.stdout.splitlines()[1:], delimiter=",")
+    want = np.loadtxt(tmp_path / "est" / "online.csv", delimiter=",", skiprows=1)
+    assert got.shape == want.shape and got.shape[0] > 200
+    np.testing.assert_allclose(got, want, rtol=1e-8, atol=1e-9)      # the text's 9 digits
+    np.testing.assert_allclose(np.loadtxt(tmp_path / "hist.csv", delimiter=",", skiprows=1),
+                               np.loadtxt(tmp_path / "est" / "states.csv", delimiter=",", skiprows=1),
+                               rtol=1e-8, atol=1e-9)
+
+
+def test_stream_refuses_batch_in_one_line(streamed):
+    d, _ = streamed
+    r = _cli("stream", "--replay", d / "log", "--method", "batch")
     assert r.returncode == 1
-    assert r.stderr.startswith("odomgraph: error: isam2 is not streamed yet") and "Traceback" not in r.stderr
+    assert r.stderr.startswith("odomgraph: error: batch smooths a whole log") and "Traceback" not in r.stderr

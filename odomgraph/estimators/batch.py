@@ -98,15 +98,7 @@ def build_problem(log: Log, schedule: Schedule, options: GraphOptions, causal: b
     p, _ = propagate(mean[0], mean[1], mean[2], mean[3], mean[4], kf.t[0] - init.t)
     mean[0:3] = p
     cov = init.P.copy()
-    mid = 0.5 * (kf.t[1:] + kf.t[:-1])
-    if not init.observability.slip_observable:
-        zero = np.ones(kf.n - 1, bool)           # nothing but the wheels sees the motion: no slip
-    elif schedule.calibrate_until is None:
-        zero = np.zeros(kf.n - 1, bool)
-    else:
-        zero = mid < meas.t_start + schedule.calibrate_until
-        slipping, _ = in_window(init.slipping, meas.t_start, meas.t_start + schedule.calibrate_until)
-        zero &= ~in_stretches(mid, slipping)
+    zero = zero_slip_intervals(kf.t, init, meas.t_start, schedule)
     robust = options.slip_cauchy
     if options.range_bias and not (kf.rng_k.size and log.robot.beacons):
         from odomgraph.errors import OdomgraphError
@@ -115,6 +107,21 @@ def build_problem(log: Log, schedule: Schedule, options: GraphOptions, causal: b
     return Problem(kf, log.robot, mean, cov, zero, robust, slip_intensity(log.robot.process, meas), loss,
                    options.robust_k, options.range_bias_sigma if options.range_bias else None,
                    options.velocity_loss, init=init, spikes=dict(meas.spikes), meas=meas)
+
+
+def zero_slip_intervals(t: np.ndarray, init, t_start: float, schedule: Schedule) -> np.ndarray:
+    """(N-1,) the keyframe intervals (keyframe times t (N,) [s]) forced to zero
+    slip: the schedule's calibration window from the log's t_start, less
+    where the wheels slipped (init.slipping), or all of them when slip is not
+    observable."""
+    mid = 0.5 * (t[1:] + t[:-1])
+    if not init.observability.slip_observable:
+        return np.ones(len(mid), bool)            # nothing but the wheels sees the motion: no slip
+    if schedule.calibrate_until is None:
+        return np.zeros(len(mid), bool)
+    zero = mid < t_start + schedule.calibrate_until
+    slipping, _ = in_window(init.slipping, t_start, t_start + schedule.calibrate_until)
+    return zero & ~in_stretches(mid, slipping)
 
 
 def initial_guess(prob: Problem, ekf: Estimate) -> tuple[np.ndarray, np.ndarray]:

@@ -112,24 +112,31 @@ class Problem:
         self.motion_whiten = 1.0 / motion_sigma(kf, self.robot.process.yaw_accel**2)
 
     def _random_walk_whiteners(self) -> np.ndarray:
-        """(N-1, 8, 8) inverse Cholesky factors of each W random-walk step covariance.
+        """(N-1, 8, 8) inverse Cholesky factors of each W random-walk step covariance
+        (random_walk_cov; the last interval has no next one and counts its own dt twice)."""
+        dt = self.kf.dt
+        self.rw_cov, whiten = random_walk_cov(self.robot.process, self.q_slip, dt, np.append(dt[1:], dt[-1]))
+        return whiten
 
-        The difference of two adjacent interval averages of a random walk of
-        intensity q has variance q (dt_k + dt_{k+1}) / 3.
-        """
-        pn, dt = self.robot.process, self.kf.dt
-        span = (dt + np.append(dt[1:], dt[-1])) / 3.0
-        Q = np.zeros((len(dt), 8, 8))
-        Q[:, 0, 0] = pn.accel**2 * span
-        Q[:, 1, 1] = pn.yaw_accel**2 * span
-        Q[:, 2, 2] = pn.gyro_bias**2 * span
-        Q[:, 3:5, 3:5] = self.q_slip[None] * span[:, None, None]
-        qs = max(pn.scale, SCALE_FLOOR) ** 2
-        for i in (5, 6, 7):
-            Q[:, i, i] = qs * span
-        self.rw_cov = Q
-        L = np.linalg.cholesky(Q)
-        return np.linalg.inv(L)
+
+def random_walk_cov(pn, q_slip: np.ndarray, dt: np.ndarray, dt_next: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(K, 8, 8) covariance of the W random-walk step from interval k to k+1,
+    and its inverse Cholesky factor, for intervals of dt (K,) [s] followed by
+    ones of dt_next (K,) [s]. ``pn``: ProcessNoise; q_slip (2, 2) [(m/s)^2/s].
+
+    The difference of two adjacent interval averages of a random walk of
+    intensity q has variance q (dt_k + dt_{k+1}) / 3.
+    """
+    span = (dt + dt_next) / 3.0
+    Q = np.zeros((len(dt), 8, 8))
+    Q[:, 0, 0] = pn.accel**2 * span
+    Q[:, 1, 1] = pn.yaw_accel**2 * span
+    Q[:, 2, 2] = pn.gyro_bias**2 * span
+    Q[:, 3:5, 3:5] = q_slip[None] * span[:, None, None]
+    qs = max(pn.scale, SCALE_FLOOR) ** 2
+    for i in (5, 6, 7):
+        Q[:, i, i] = qs * span
+    return Q, np.linalg.inv(np.linalg.cholesky(Q))
 
 
 #: Default thresholds [sigma] of the measurement losses. Cauchy at 5 sigma is

@@ -337,8 +337,10 @@ class _Runner:
     """The shared loop; subclasses hold the GTSAM engine."""
 
     method = ""
+    #: Arrays with one row per keyframe (``_grow`` makes room as a stream adds keyframes).
+    per_keyframe = ("pose", "W", "update_times")
 
-    def __init__(self, log: Log, schedule: Schedule, options: IncrementalOptions):
+    def __init__(self, log: Log, schedule: Schedule, options: IncrementalOptions, prob: Problem | None = None):
         if options.range_bias or options.velocity_loss is not None:
             from odomgraph.errors import OdomgraphError
             raise OdomgraphError(f"{self.method}: range biases and a robust velocity random walk are "
@@ -346,8 +348,9 @@ class _Runner:
         self.log, self.schedule, self.options = log, schedule, options
         # _watch: per sensor [slow running mean, count, dof, the last few values]
         self._ema = {"GPS fixes": [2.0, 0, 2, []], "ranges": [1.0, 0, 1, []]}
-        # causal: the online row of interval k is produced at t_{k+1} from data up to t_{k+1}
-        self.prob = build_problem(log, schedule, options, causal=True)
+        # causal: the online row of interval k is produced at t_{k+1} from data up to t_{k+1}.
+        # A stream (estimators.growing) passes the problem it grows.
+        self.prob = prob if prob is not None else build_problem(log, schedule, options, causal=True)
         if options.wheel_speed_units:
             self.prob.speed_ref = self.prob.prior_mean[8:11].copy()   # the prior's scale factors
         self.graph = _Graph(self.prob, options)
@@ -359,6 +362,23 @@ class _Runner:
         self.update_times = np.zeros(n)
         self.recoveries: list[str] = []
         self._recovered_at: list[float] = []
+        # The last keyframe: no segment hands over there. A stream does not know it until it ends.
+        self.last_k = n - 1
+
+    def _grow(self, n: int) -> None:
+        """Room for n keyframes in every per-keyframe array (doubling: a stream adds one at a time)."""
+        for name in self.per_keyframe:
+            a = getattr(self, name)
+            if len(a) < n:
+                b = np.zeros((max(n, 2 * len(a)),) + a.shape[1:], a.dtype)
+                b[:len(a)] = a
+                setattr(self, name, b)
+
+    def trim(self) -> None:
+        """Per-keyframe arrays cut to the problem's keyframes (before finish)."""
+        n = self.prob.kf.n
+        for name in self.per_keyframe:
+            setattr(self, name, getattr(self, name)[:n])
 
     def _new_keyframe(self, k: int) -> None:
         """Predict keyframe k from k-1 (its initial value)."""
@@ -375,24 +395,34 @@ class _Runner:
 
     def run(self, progress=None) -> Estimate:
         wall0 = time.perf_counter()
-        kf = self.prob.kf
-        n = kf.n
-        self.start(self.graph.prior_factors(self.pose, self.W), self.graph.values(0, self.pose, self.W))
+        n = self.prob.kf.n
+        self.begin()
         stride = max(1, n // 200)
         for k in range(1, n):
-            t0 = time.perf_counter()
-            self._new_keyframe(k)
-            factors = self.graph.interval_factors(k - 1, self.pose, self.W, first=True)
-            self.step(k, factors, self.graph.values(k, self.pose, self.W))
-            self.update_times[k] = time.perf_counter() - t0
-            if not (np.all(np.isfinite(self.pose[k])) and np.all(np.isfinite(self.W[k]))):
-                raise EstimatorDivergedError(f"{self.method} diverged at t={kf.t[k]:.3f} s: non-finite estimate")
-            reason = self._watch(k - 1)
-            if reason is not None:
-                self._trip(k, reason)
+            self.advance(k)
             if progress is not None and k % stride == 0:
                 progress(k, n)
         return self.finish(wall0)
+
+    def begin(self) -> None:
+        """The engine, with the prior on keyframe 0."""
+        self.start(self.graph.prior_factors(self.pose, self.W), self.graph.values(0, self.pose, self.W))
+
+    def advance(self, k: int) -> None:
+        """Keyframe k: one incremental update with interval k-1's factors,
+        then the divergence watch, and a recovery if it trips. The problem
+        must hold interval k-1 (a stream appends it first)."""
+        t0 = time.perf_counter()
+        self._grow(k + 1)
+        self._new_keyframe(k)
+        factors = self.graph.interval_factors(k - 1, self.pose, self.W, first=True)
+        self.step(k, factors, self.graph.values(k, self.pose, self.W))
+        self.update_times[k] = time.perf_counter() - t0
+        if not (np.all(np.isfinite(self.pose[k])) and np.all(np.isfinite(self.W[k]))):
+            raise EstimatorDivergedError(f"{self.method} diverged at t={self.prob.kf.t[k]:.3f} s: non-finite estimate")
+        reason = self._watch(k - 1)
+        if reason is not None:
+            self._trip(k, reason)
 
     def _estimate(self, Sig: np.ndarray, wall0: float, notes: list[str], **extra) -> Estimate:
         """The run's Estimate from its keyframe marginals Sig (N, 11, 11) (batch.smoother_estimate),
@@ -536,6 +566,7 @@ def _block_local(vals, pose: np.ndarray, W: np.ndarray) -> np.ndarray:
 
 class ISAM2Runner(_Runner):
     method = "isam2"
+    per_keyframe = _Runner.per_keyframe + ("online", "online_sigma")
 
     def start(self, factors, values):
         self.isam = gtsam.ISAM2(_params(self.options, reuse_slots=True))
@@ -576,7 +607,7 @@ class ISAM2Runner(_Runner):
             self.W[i, S_IDX] = isam.calculateEstimateVector(S_KEY(i))
         self._online_row(k)
         seg = self.options.segment
-        if seg > 0 and kf.t[k] - kf.t[self.seg_start] >= seg and k < kf.n - 1:
+        if seg > 0 and kf.t[k] - kf.t[self.seg_start] >= seg and k < self.last_k:
             self._hand_over(k)
 
     def _online_row(self, k):
@@ -832,6 +863,7 @@ class ISAM2Runner(_Runner):
 
 class FixedLagRunner(_Runner):
     method = "fixed-lag"
+    per_keyframe = _Runner.per_keyframe + ("done", "Sig")
 
     def start(self, factors, values):
         self.smoother = gtsam.IncrementalFixedLagSmoother(self.options.lag, _params(self.options, reuse_slots=True))

@@ -240,11 +240,19 @@ def _max_gap(ts: np.ndarray, t_kf: np.ndarray) -> float:
     return max(min(3.0 * period, 0.5), 2.0 * float(np.median(np.diff(t_kf))))
 
 
-def build_keyframes(log: Log, t_start: float, keyframe_hz: float, causal: bool = False) -> Keyframes:
+def keyframe_step(t: np.ndarray, keyframe_hz: float) -> int:
+    """Wheel rows per keyframe: about ``keyframe_hz`` [Hz] on rows at times t [s] (at least 1)."""
+    return max(1, int(round((1.0 / keyframe_hz) / np.median(np.diff(t))))) if len(t) > 1 else 1
+
+
+def build_keyframes(log: Log, t_start: float, keyframe_hz: float, causal: bool = False,
+                    step: int | None = None) -> Keyframes:
     """Keyframes from ``t_start`` on, at about ``keyframe_hz`` (at most the encoder rate).
 
     ``causal``: no interval reads data after its end (interval_means); for
-    the incremental smoothers."""
+    the incremental smoothers. ``step``: wheel rows per keyframe, when the
+    caller fixed it (a stream, odomgraph.online: the rows so far decide it);
+    None: keyframe_step over the log's wheel rows."""
     r = log.robot
     a, b = r.encoder_sigma
     if log.encoders is not None:
@@ -252,7 +260,7 @@ def build_keyframes(log: Log, t_start: float, keyframe_hz: float, causal: bool =
         tpm = np.array([r.ticks_per_meter_left, r.ticks_per_meter_right])
         t_all = e.t
         first = int(np.searchsorted(t_all, t_start, side="left"))
-        step = max(1, int(round((1.0 / keyframe_hz) / np.median(np.diff(t_all)))))
+        step = step or keyframe_step(t_all, keyframe_hz)
         idx = np.arange(first, len(t_all), step)
         if idx[-1] != len(t_all) - 1:
             idx = np.append(idx, len(t_all) - 1)
@@ -273,7 +281,7 @@ def build_keyframes(log: Log, t_start: float, keyframe_hz: float, causal: bool =
     else:
         w = log.wheel_speeds
         first = int(np.searchsorted(w.t, t_start, side="left"))
-        step = max(1, int(round((1.0 / keyframe_hz) / np.median(np.diff(w.t))))) if len(w.t) > 1 else 1
+        step = step or keyframe_step(w.t, keyframe_hz)
         idx = np.arange(first, len(w.t), step)
         if idx[-1] != len(w.t) - 1:
             idx = np.append(idx, len(w.t) - 1)
