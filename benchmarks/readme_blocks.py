@@ -1136,12 +1136,36 @@ def report_size(results: Path) -> str:
     return textwrap.indent(textwrap.fill(out, 74) + f"\n{_source('report_size', d)}", "    ")
 
 
+def online_stream(results: Path) -> str:
+    """The live estimator's latency, throughput, memory and equality (benchmarks.online)."""
+    d = _load("online", results)
+    runs = d["runs"]
+    length = "one-hour" if d["minutes"] == 60 else f"{d['minutes']:g}-minute"
+    out = [f"- **Live, on a {length} stream** (encoders 20 Hz, GPS 10 Hz, gyro 20 or 100 Hz; every "
+           "measurement pushed through `Online.push`, each call timed):"]
+    for m in ("ekf", "isam2", "fixed-lag"):
+        rs = [r for r in runs if r["method"] == m]
+        if not rs:
+            continue
+        p99 = _rng([r["p99_ms"] for r in rs], "{:.1f}", " ms")
+        rt = _rng([r["realtime_x"] for r in rs], "{:.0f}", "×")
+        mem = _rng([r["rss_last_mb"] / r["rss_first_mb"] for r in rs], "{:.2f}", "×")
+        eq = max((r["max_abs_diff"] for r in rs if r["max_abs_diff"] is not None), default=None)
+        eqs = "rows differ in number from" if eq is None or any(r["max_abs_diff"] is None for r in rs) else \
+            f"rows within {eq:.0e} of"
+        what = "online.csv" if m == "isam2" else "states.csv"
+        out.append(f"  - `{m}`: p99 {p99} per measurement, {rt} real time, memory of the last 10 % {mem} "
+                   f"the first's; {eqs} `estimate`'s {what};")
+    out[-1] = out[-1].rstrip(";") + "."
+    return "\n".join(out) + "\n\n  " + _source("online", d)
+
+
 BLOCKS = {f.__name__: f for f in (
     ekf_accuracy, ekf_throughput, smoother_accuracy, faults, real_data_honesty,
     # README.md
     smoother_scale, wheel_speed_units, montecarlo_wall, montecarlo_findings, optiodom_transfer, librsf_limits,
     calibration_transfer,
-    faults_still, range_bias, report_size, weak_gps,
+    faults_still, range_bias, report_size, weak_gps, online_stream,
     # benchmarks/README.md
     ekf_accuracy_table, ekf_throughput_table, smoother_accuracy_table, smoother_accuracy_findings, track_bias,
     smoother_consistency, speed_shrinkage, smoother_scaling_table, smoother_scaling_memory_peer, real_data_tables,

@@ -14,11 +14,13 @@ __version__ = "0.1.0"
 #: The public API, imported on first use (``import odomgraph`` stays light):
 #: ``odomgraph.read_log(DIR)``, ``odomgraph.estimate(log, "batch")``,
 #: ``odomgraph.calibrate(log)``, ``odomgraph.compare(log)`` (every estimator
-#: side by side), ``odomgraph.simulate(scenario, seed)``.
+#: side by side), ``odomgraph.simulate(scenario, seed)``, ``odomgraph.Online(robot, "isam2")``
+#: (live, one measurement at a time) with ``odomgraph.load_robot("robot.toml")``.
 _API = {"read_log": "odomgraph.io.log", "write_log": "odomgraph.io.log", "estimate": "odomgraph.pipeline",
         "calibrate": "odomgraph.pipeline", "Method": "odomgraph.estimators.registry",
         "Schedule": "odomgraph.estimators.schedule", "simulate": "odomgraph.sim.simulate",
-        "Estimate": "odomgraph.result", "compare": "odomgraph.runs"}
+        "Estimate": "odomgraph.result", "compare": "odomgraph.runs", "Online": "odomgraph.online",
+        "load_robot": "odomgraph.io.robot"}
 __all__ = ["__version__", *_API]
 
 

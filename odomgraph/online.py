@@ -71,8 +71,11 @@ from odomgraph.io.robot import RobotConfig
 SENSOR_VALUES = {"encoders": ("ticks_left", "ticks_right"), "wheel_speeds": ("v_left", "v_right"),
                  "gps": ("x", "y", "sigma"), "gyro": ("omega",), "ranges": ("beacon", "range"),
                  "velocity": ("v", "omega")}
-#: Rows ahead of an event that the cleaning reads (measurements._spikes' half window, plus one).
-AHEAD_ROWS = 4
+#: Rows either side of a sample that the spike filter reads (measurements._spikes).
+SPIKE_HALF = 3
+#: Rows ahead of an EKF event that must have arrived: an encoder event sits
+#: between two rows, so one more than the spike filter reads.
+AHEAD_ROWS = SPIKE_HALF + 1
 #: A sensor whose newest row is this much older than the newest data [s] has
 #: stopped (a dropout): the filter no longer waits for its rows ahead.
 STOPPED_AFTER = 1.0
@@ -298,9 +301,9 @@ class Online:
             kw["velocity"] = Velocity(a[0], *a[1])
         return Log(self.robot, **kw)
 
-    def _final_before(self) -> float:
+    def _final_before(self, ahead: int = AHEAD_ROWS) -> float:
         """Events before this time [s] can no longer change: every row they
-        depend on, and AHEAD_ROWS rows after them, have been released."""
+        depend on, and ``ahead`` rows after them, have been released."""
         b = self.t_released
         off = self.robot.gps_time_offset
         if off > 0:
@@ -309,11 +312,11 @@ class Online:
             rows = self._raw[sensor]
             if not rows or rows[-1][0] < self.t_released - STOPPED_AFTER:
                 continue
-            if len(rows) <= AHEAD_ROWS:
+            if len(rows) <= ahead:
                 return -math.inf
             # encoder events sit midway between two rows: the next row's event
-            # lies after the newest row, AHEAD_ROWS rows back is final
-            b = min(b, rows[-1 - AHEAD_ROWS][0])
+            # lies after the newest row, ``ahead`` rows back is final
+            b = min(b, rows[-1 - ahead][0])
         return b
 
     def _advance(self, final: bool) -> list[OnlineRow]:
@@ -323,7 +326,13 @@ class Online:
             if not final and self.t_released < self.t_first + self.warmup:
                 return []
             self._start()
-        b = math.inf if final else self._final_before()
+        if final:
+            b = math.inf
+        elif self.smoother is not None:
+            # the smoother's intervals end on a wheel row: the cleaning reads SPIKE_HALF rows past it
+            b = self._final_before(SPIKE_HALF)
+        else:
+            b = self._final_before()
         if self.smoother is not None:
             out = self.smoother.feed(self, b, final)
         elif not final and b - self.t_done < self.chunk:
@@ -496,7 +505,8 @@ class _Smoother:
         self.wall0 = __import__("time").perf_counter()
         self._emitted = 0               # fixed-lag: keyframes whose row was written
         r.begin()
-        self.pending = list(range(1, m + 1))    # keyframes to advance to
+        self.next_k = 1                 # the next keyframe to advance to
+        self.no_walk: list[int] = []    # intervals appended whose random walk waits for the next keyframe
 
     def wheel_row(self, i: int, t: float) -> None:
         """Wheel row i (of the whole stream) was released at t [s]."""
@@ -510,7 +520,11 @@ class _Smoother:
         return self.kf_times[max(j - WINDOW_BACK, 0)]
 
     def feed(self, online: Online, b: float, final: bool) -> list[OnlineRow]:
-        """Append every interval that is final before b, advance, and return the new rows."""
+        """Append every interval whose data are final (their end t_{j+1} <= b),
+        then advance every keyframe whose interval and random walk are ready
+        (the walk needs the next keyframe's time, which comes a row or so
+        later: the two halves of the work fall on different measurements).
+        Returns the new rows."""
         from odomgraph.estimators.growing import WINDOW_BACK, window_piece
         r, kt = self.runner, self.kf_times
         if final:
@@ -519,24 +533,27 @@ class _Smoother:
                 kt = kt + [wheel[-1][0]]        # the whole log's last keyframe: its last wheel row
         j0 = r.prob.kf.n - 1                     # intervals j0.. are not in the problem yet
         j1 = j0
-        while j1 + 1 < len(kt) and (final or (j1 + 2 < len(kt) and kt[j1 + 1] < b)):
+        while j1 + 1 < len(kt) and (final or kt[j1 + 1] <= b):
             j1 += 1
         if j1 > j0:
             w0 = max(j0 - WINDOW_BACK, 0)
             piece = window_piece(online._log(kt[w0] - online.context), kt[w0], kt[j1], r.options.keyframe_hz,
                                  self.step)
             for j in range(j0, j1):
-                t_next = kt[j + 2] if j + 2 < len(kt) else kt[j + 1]
-                self.grow.append(piece, j - w0, t_next, self.t_start)
-            self.pending += list(range(j0 + 1, j1 + 1))
+                self.grow.append(piece, j - w0, None, self.t_start)
+                self.no_walk.append(j)
+        while self.no_walk and (final or self.no_walk[0] + 2 < len(kt)):
+            j = self.no_walk.pop(0)
+            self.grow.set_walk(j, kt[j + 2] if j + 2 < len(kt) else kt[j + 1])
         if final:
             r.last_k = r.prob.kf.n - 1
         out = []
-        for k in self.pending:
-            r.advance(k)
+        ready = r.prob.kf.n - 1 - len(self.no_walk)       # keyframes up to here have their interval
+        while self.next_k <= ready:
+            r.advance(self.next_k)
             if self.isam2:
-                out.append(self._online_row(k, online))
-        self.pending = []
+                out.append(self._online_row(self.next_k, online))
+            self.next_k += 1
         if not self.isam2:
             out += self._harvested(online, final)
         if final:

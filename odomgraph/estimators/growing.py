@@ -107,10 +107,11 @@ class GrowingProblem:
         self.buf.view("rw_cov")[j] = Q[0]
         self.buf.view("rw_whiten")[j] = L[0]
 
-    def append(self, piece: Keyframes, w: int, t_next: float, log_t_start: float) -> None:
+    def append(self, piece: Keyframes, w: int, t_next: float | None, log_t_start: float) -> None:
         """Interval ``w`` of ``piece`` (the keyframes of a window that starts at
         one of this problem's keyframes) as the next interval; t_next [s]: the
-        keyframe after its end (its own end again for the stream's last)."""
+        keyframe after its end (its own end again for the stream's last), or
+        None when not known yet (``set_walk`` later, before it is read)."""
         b = self.buf
         j = b.n["enc_m"]                                     # its index here
         b.append("t", piece.t[w + 1:w + 2])
@@ -134,9 +135,16 @@ class GrowingProblem:
         b.append("rw_cov", np.zeros((1, 8, 8)))
         b.append("rw_whiten", np.zeros((1, 8, 8)))
         b.append("no_slip", np.zeros(1, bool))
+        self._publish(g.size, r.size)
+        if t_next is not None:
+            self.set_walk(j, t_next)
+
+    def set_walk(self, j: int, t_next: float) -> None:
+        """Interval j's random walk, now that the keyframe after its end is
+        known at t_next [s] (its own end again: the stream's last interval)."""
+        t = self.buf.view("t")
         dt = float(t[j + 1] - t[j])
         self._set_walk(j, dt, float(t_next - t[j + 1]) if t_next > t[j + 1] else dt)
-        self._publish(g.size, r.size)
 
     def _publish(self, g_max: int = 0, r_max: int = 0) -> None:
         """Every problem reads the buffers' filled parts; g_max, r_max: the

@@ -19,6 +19,7 @@ and ranges keep their own time, at offset tau after t_k.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 
@@ -71,8 +72,10 @@ class Keyframes:
     gps_t: np.ndarray | None = None
     """(G,) time of each fix [s]."""
 
-    @property
+    @cached_property
     def dt(self) -> np.ndarray:
+        """(N-1,) interval lengths [s], computed once (a stream's problem,
+        estimators.growing, makes a new Keyframes per keyframe)."""
         return np.diff(self.t)
 
     @property
@@ -299,7 +302,10 @@ def build_keyframes(log: Log, t_start: float, keyframe_hz: float, causal: bool =
     # Forward travel (mean of the wheels) and turning (their difference) at the keyframes.
     fwd = travel.mean(1)
     turn = travel[:, 1] - travel[:, 0]
-    eps = 2.0 / max(r.ticks_per_meter_left, r.ticks_per_meter_right, 1.0)   # two ticks [m]
+    # More than two ticks [m]. The half tick keeps whole tick counts off the
+    # threshold: at exactly two, rounding in the cumulative travel decided,
+    # and a stream (whose windows sum from another origin) decided otherwise.
+    eps = 2.5 / max(r.ticks_per_meter_left, r.ticks_per_meter_right, 1.0)
 
     def effective(k, ts):
         """(len, 2) effective (tau_v, tau_omega) of times ts in intervals k."""
