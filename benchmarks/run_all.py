@@ -20,7 +20,7 @@ import time
 
 #: Timing-sensitive benchmarks first, so that nothing else has warmed or
 #: fragmented the machine; then the long studies.
-ORDER = ("ekf_throughput", "ekf_vectorised", "smoother_scaling", "log_io", "report_size", "ekf_accuracy",
+ORDER = ("ekf_throughput", "ekf_vectorised", "smoother_scaling", "online", "log_io", "report_size", "ekf_accuracy",
          "smoother_accuracy", "speed_shrinkage", "track_bias", "velocity_means", "real_data",
          "calibration_transfer", "weak_gps", "faults", "fuzz", "montecarlo_study")
 

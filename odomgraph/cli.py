@@ -743,11 +743,17 @@ def stream(
     = None,
     keyframe_hz: Annotated[Optional[float], typer.Option(help="Smoothers: keyframe rate [Hz] (default 5).")] = None,
     lag: Annotated[Optional[float], typer.Option(help="fixed-lag: window length [s] (default 5).")] = None,
+    slip_cauchy: Annotated[Optional[float], typer.Option(
+        help="Smoothers: Cauchy scale [m/s] of the sparse zero-slip prior (as estimate).")] = None,
+    robust: Annotated[Optional[RobustName], typer.Option(
+        help="Smoothers: robust loss for GPS fixes and ranges (as estimate).")] = None,
+    robust_k: Annotated[Optional[float], typer.Option(help="Threshold of the robust loss in sigmas.")] = None,
     history: Annotated[Optional[Path], typer.Option(
         help="Smoothers: at the end, write the fully smoothed states of the whole stream to this states.csv.")]
     = None,
     rate: Annotated[Optional[float], typer.Option(
-        min=1e-6, max=1000.0, help="Write at most one row per 1/rate seconds [Hz] (default: every encoder row).")]
+        min=1e-6, max=1000.0, help="Write one row per 1/rate seconds of log time [Hz]: the first at or after "
+                                   "each multiple of 1/rate (default: every row).")]
     = None,
     latency: Annotated[float, typer.Option(
         min=0.0, help="How far out of order [s] measurements may arrive; older ones are rejected and counted.")]
@@ -784,7 +790,8 @@ def stream(
             raise _click_exc.UsageError("give --robot robot.toml (or --replay LOG, whose robot.toml is used)")
         live = Online(load_robot(robot if robot is not None else replay / "robot.toml"), method.value,
                       _parse_schedule(calibrate_until, hold), latency=latency, warmup=warmup,
-                      journal=checkpoint is not None, gate=gate, keyframe_hz=keyframe_hz, lag=lag)
+                      journal=checkpoint is not None, gate=gate, keyframe_hz=keyframe_hz, lag=lag,
+                      slip_cauchy=slip_cauchy, robust=robust.value if robust else None, robust_k=robust_k)
     if replay is not None:
         from odomgraph.io.log import read_log
         from odomgraph.io.stream import log_lines

@@ -36,8 +36,8 @@ def run_stream(online: Online, lines: Iterable[str], out: IO[str], err: IO[str],
                rate: float | None = None, speed: float = 0.0, checkpoint=None, checkpoint_every: float = 60.0,
                skip_lines: int = 0) -> StreamStats:
     """Stream ``lines`` through ``online``; rows to ``out`` (states.csv header
-    first), problems to ``err``. ``rate`` [Hz]: at most one row per 1/rate
-    seconds of log time (None: every row). ``speed``: pace the lines against
+    first), problems to ``err``. ``rate`` [Hz]: one row per 1/rate seconds
+    of log time, the first at or after each multiple of 1/rate (None: every row). ``speed``: pace the lines against
     the wall clock at this multiple of real time (0: as fast as possible).
     ``checkpoint``: path written every ``checkpoint_every`` seconds of log
     time, and when the input ends (before the last rows are
@@ -47,7 +47,7 @@ def run_stream(online: Online, lines: Iterable[str], out: IO[str], err: IO[str],
     out.write(HEADER + "\n")
     out.flush()
     next_t = [-math.inf]
-    said = [len(online.ekf.recoveries) if online.ekf is not None else 0]
+    said = [len(online.ekf.recoveries) if online.ekf is not None else 0, len(online.restarts)]
     wall0 = t_first = None
     last_ckpt = None
 
@@ -61,11 +61,17 @@ def run_stream(online: Online, lines: Iterable[str], out: IO[str], err: IO[str],
             st.rows += 1
         if rows:
             out.flush()
-        ekf = online.ekf
-        if ekf is not None and len(ekf.recoveries) > said[0]:
-            for msg in ekf.recoveries[said[0]:]:
+        eng = online.ekf if online.ekf is not None else (online.smoother.runner if online.smoother else None)
+        if eng is not None and len(eng.recoveries) > said[0]:
+            for msg in eng.recoveries[said[0]:]:
                 err.write(f"odomgraph: recovered: {msg}\n")
-            said[0] = len(ekf.recoveries)
+            said[0] = len(eng.recoveries)
+            err.flush()
+        if len(online.restarts) > said[1]:
+            for msg in online.restarts[said[1]:]:
+                err.write(f"odomgraph: restarted: {msg}\n")
+            said[1] = len(online.restarts)
+            said[0] = 0                 # a new engine counts its recoveries from 0
             err.flush()
 
     for n, line in enumerate(lines, 1):
@@ -133,6 +139,8 @@ def summary_lines(online: Online, st: StreamStats) -> list[str]:
         out.append(f"stream: {st.skipped_bad} lines could not be read and were skipped")
     if s["recoveries"]:
         out.append(f"stream: {len(s['recoveries'])} recoveries (said above as they happened)")
+    if s["restarts"]:
+        out.append(f"stream: {len(s['restarts'])} restarts after a divergence (said above)")
     out += [f"warning: {w}" for w in s["warnings"]]
     return out
 

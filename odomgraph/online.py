@@ -54,7 +54,7 @@ from pathlib import Path
 import numpy as np
 
 from odomgraph import state as S
-from odomgraph.errors import OdomgraphError, OptionError
+from odomgraph.errors import EstimatorDivergedError, OdomgraphError, OptionError
 from odomgraph.estimators.ekf import EKF, event_values
 from odomgraph.estimators.initial import CONSENSUS_WINDOW
 from odomgraph.estimators.measurements import from_log
@@ -64,13 +64,9 @@ from odomgraph.estimators.sensors import SENSOR_NAMES, WHEEL, event_stream
 from odomgraph.estimators.slipcheck import in_stretches
 from odomgraph.io.csvtable import ORIGIN_ABOVE
 from odomgraph.io.log import Encoders, Gps, Gyro, Log, Ranges, Velocity, WheelSpeeds
+from odomgraph.io.stream import SENSOR_COLUMNS
 from odomgraph.io.robot import RobotConfig
 
-#: Each sensor's value names, in order (LOG_FORMAT.md columns after ``t``);
-#: gps takes an optional third, its sigma [m].
-SENSOR_VALUES = {"encoders": ("ticks_left", "ticks_right"), "wheel_speeds": ("v_left", "v_right"),
-                 "gps": ("x", "y", "sigma"), "gyro": ("omega",), "ranges": ("beacon", "range"),
-                 "velocity": ("v", "omega")}
 #: Rows either side of a sample that the spike filter reads (measurements._spikes).
 SPIKE_HALF = 3
 #: Rows ahead of an EKF event that must have arrived: an encoder event sits
@@ -79,6 +75,8 @@ AHEAD_ROWS = SPIKE_HALF + 1
 #: A sensor whose newest row is this much older than the newest data [s] has
 #: stopped (a dropout): the filter no longer waits for its rows ahead.
 STOPPED_AFTER = 1.0
+#: Restarts after a divergence (Online._restart) before the stream gives up and says why.
+MAX_RESTARTS = 20
 #: Margin [s] past the calibration window (or start-pose fit) that the warm-up adds.
 WARMUP_MARGIN = 5.0
 
@@ -159,7 +157,7 @@ class Online:
         self._beacons = {b.id: i for i, b in enumerate(robot.beacons)}
         self._heap: list = []                          # (t, seq, sensor, values) not yet released
         self._seq = 0
-        self._raw: dict[str, list] = {s: [] for s in SENSOR_VALUES}   # released (t, values), in time order
+        self._raw: dict[str, list] = {s: [] for s in SENSOR_COLUMNS}   # released (t, values), in time order
         self.t_origin: int | None = None
         self.t_newest = -math.inf                       # newest stamp pushed
         self.t_released = -math.inf                     # every row older than this is released
@@ -174,6 +172,7 @@ class Online:
         self.notes: list[str] = []
         self.closed = False
         self.lines_read = 0         # input lines consumed (odomgraph stream keeps it for --resume)
+        self.restarts: list[str] = []   # divergences the estimator did not recover from itself
         # A smoother's GTSAM state cannot be pickled: its checkpoint is every
         # measurement pushed so far, replayed on load (deterministic, so equal).
         self.journal: list | None = [] if journal else None
@@ -222,9 +221,9 @@ class Online:
         return self.push("velocity", t, v, omega)
 
     def _values(self, sensor: str, values) -> tuple:
-        names = SENSOR_VALUES.get(sensor)
+        names = SENSOR_COLUMNS.get(sensor)
         if names is None:
-            raise StreamInputError(f"unknown sensor {sensor!r}; one of {', '.join(SENSOR_VALUES)}")
+            raise StreamInputError(f"unknown sensor {sensor!r}; one of {', '.join(SENSOR_COLUMNS)}")
         want = (2, 3) if sensor == "gps" else (len(names),)
         if len(values) not in want:
             raise StreamInputError(f"{sensor}: expected {' or '.join(map(str, want))} values "
@@ -320,6 +319,37 @@ class Online:
         return b
 
     def _advance(self, final: bool) -> list[OnlineRow]:
+        try:
+            return self._advance_once(final)
+        except EstimatorDivergedError as exc:
+            if final or len(self.restarts) >= MAX_RESTARTS:
+                raise
+            self._restart(exc)
+            return []
+
+    def _restart(self, exc: Exception) -> None:
+        """The estimator diverged beyond its own recoveries: a robot still
+        needs an estimate, so start again on the data from the last row on,
+        at that row's pose with a wide sigma (or as at the start, before any
+        row), with robot.toml's parameters: the diverged run's are suspect."""
+        from odomgraph.io.robot import InitialPose
+        t_r = self.last.t if self.last is not None else self.t_first
+        if self.last is not None:
+            x, y, th = (float(v) for v in self.last.mean[:3])
+            sx, sy, sth = (float(v) for v in self.last.sigma[:3])
+            self.robot = self.robot.with_(initial=InitialPose(x, y, th, (max(3 * sx, 1.0), max(3 * sy, 1.0),
+                                                                         max(3 * sth, 0.5))))
+        for rows in self._raw.values():
+            while rows and rows[0][0] < t_r:
+                del rows[0]
+        firsts = [rows[0][0] for rows in self._raw.values() if rows]
+        self.t_first = min(firsts) if firsts else None
+        self.ekf = self.smoother = None
+        self.t_done = -math.inf
+        self.restarts.append(f"t={t_r:.2f} s: {' '.join(str(exc).split())}; restarted from the last estimate's "
+                             f"pose (sigma widened), warming up again for {self.warmup:g} s")
+
+    def _advance_once(self, final: bool) -> list[OnlineRow]:
         if self.t_first is None:
             return []
         if self.ekf is None and self.smoother is None:
@@ -390,10 +420,9 @@ class Online:
             if i:
                 del rows[:i]
         if self.ekf is not None:
-            # the filter's own lists of held-out times and recoveries: the counts stay, the oldest go
+            # the filter's own lists of held-out times: the last thousand per sensor are plenty
             for k, v in self.ekf.held_t.items():
                 del v[:-1000]
-            del self.ekf.recoveries[:-1000]
 
     # ----------------------------------------------------------- output
     def estimate(self) -> OnlineRow | None:
@@ -426,6 +455,7 @@ class Online:
         return {"method": self.method.value, "t_origin": self.t_origin or 0, "accepted": accepted,
                 "rejected_by_gate": rejected, "rejected_late": dict(c.late),
                 "repeated_stamps": dict(c.repeated), "recoveries": list(eng.recoveries) if eng else [],
+                "restarts": list(self.restarts),
                 "warnings": warnings,
                 "notes": list(self.notes), "warmup_s": self.warmup, "latency_s": self.latency}
 
@@ -483,6 +513,8 @@ class _Smoother:
         self.step = keyframe_step(wheel.t, opt.keyframe_hz)
         prob = build_problem(log, sch, opt, causal=True)
         self.first = int(np.searchsorted(wheel.t, prob.init.t, side="left"))
+        # the stream's wheel row number of this log's first row (a restart starts a new log)
+        self.offset = online._wheel_rows - len(wheel.t)
         # the keyframes of the whole log are every step-th wheel row from `first` on
         self.kf_times = [float(t) for t in wheel.t[self.first::self.step]]
         self.t_start = min(float(s.t[0]) for s in log.sensors() if len(s.t))
@@ -510,6 +542,7 @@ class _Smoother:
 
     def wheel_row(self, i: int, t: float) -> None:
         """Wheel row i (of the whole stream) was released at t [s]."""
+        i -= self.offset
         if i > self.first + (len(self.kf_times) - 1) * self.step and (i - self.first) % self.step == 0:
             self.kf_times.append(t)
 

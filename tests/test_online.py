@@ -131,6 +131,39 @@ def test_resumed_from_a_checkpoint_equals_the_uninterrupted_run(tmp_path):
     assert all(np.array_equal(a.mean, b.mean) and np.array_equal(a.sigma, b.sigma) for a, b in zip(rows, ref))
 
 
+@pytest.mark.parametrize("method", ["ekf", "isam2"])
+def test_a_divergence_beyond_recovery_restarts_the_stream(monkeypatch, method):
+    """An estimator that gives up mid-stream: the stream starts again at the
+    last pose and goes on, and says so (the replay would have stopped)."""
+    from odomgraph.errors import EstimatorDivergedError
+    from odomgraph.estimators import ekf, incremental
+    log = simulate(paper(90), 17)
+    sch = Schedule(calibrate_until=20.0)
+    once = {"done": False}
+    cls, name = (ekf.EKF, "step") if method == "ekf" else (incremental._Runner, "advance")
+    real = getattr(cls, name)
+
+    def failing(self, *args, **kw):
+        t = args[0] if method == "ekf" else float(self.prob.kf.t[args[0]])
+        if t > 40.0 and not once["done"]:
+            once["done"] = True
+            raise EstimatorDivergedError(f"diverged on purpose at t={t:.2f} s")
+        return real(self, *args, **kw)
+    monkeypatch.setattr(cls, name, failing)
+    live, rows = _stream(log, sch, method=method)
+    assert len(live.restarts) == 1 and "diverged on purpose" in live.restarts[0]
+    t = np.array([r.t for r in rows])
+    assert t[-1] > 85.0 and np.all(np.diff(t) > 0)
+    # the restarted estimate is still near the truth (wide sigma at the restart, then the fixes)
+    truth = log.truth
+    late = t > 75.0
+    x = np.interp(t[late], truth.t, truth.values["x"])
+    y = np.interp(t[late], truth.t, truth.values["y"])
+    err = np.hypot(np.array([r.mean[0] for r in rows])[late] - x, np.array([r.mean[1] for r in rows])[late] - y)
+    assert err.max() < 0.5
+    assert all(np.isfinite(r.mean).all() and np.isfinite(r.sigma).all() for r in rows)
+
+
 def test_bad_values_are_refused_with_a_reason():
     log = simulate(paper(5), 1)
     live = Online(log.robot, "ekf", Schedule(calibrate_until=20.0))
@@ -248,6 +281,25 @@ def test_stream_resumes_from_its_checkpoint(streamed, tmp_path):
     assert len(resumed) > 100
     # the resumed rows are the uninterrupted run's last rows, exactly
     assert resumed == full[len(full) - len(resumed):]
+
+
+def test_stream_rate_and_pacing(streamed):
+    import time
+    d, states = streamed
+    every = {ln.split(",")[0]: ln for ln in states.splitlines()[1:]}
+    t0 = time.monotonic()
+    r = _cli("stream", "--replay", d / "log", "--rate", "2", "--speed", "10")
+    wall = time.monotonic() - t0
+    assert r.returncode == 0, r.stderr
+    rows = r.stdout.splitlines()[1:]
+    t = np.array([float(ln.split(",")[0]) for ln in rows])
+    # one row per half second of log time (the first at or after each multiple of 0.5 s),
+    # each one of the full stream's rows, exactly
+    slot = np.floor(t * 2.0 + 1e-9)
+    assert np.all(np.diff(slot) >= 1) and len(rows) >= 0.95 * (slot[-1] - slot[0])
+    assert all(every[ln.split(",")[0]] == ln for ln in rows)
+    # 50 s of log at 10x real time: at least 5 s of wall time
+    assert wall >= 4.5
 
 
 def test_stream_isam2_writes_online_csv_and_its_history(streamed, tmp_path):

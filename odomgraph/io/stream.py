@@ -24,6 +24,13 @@ from odomgraph import state as S
 from odomgraph.io.csvtable import stamp_text
 from odomgraph.io.log import Log
 
+#: Each sensor's values on a line, in order: its LOG_FORMAT.md columns after
+#: ``t`` (gps's third, sigma [m], is optional). One table for the stream's
+#: reader (odomgraph.online) and writer (log_lines).
+SENSOR_COLUMNS = {"encoders": ("ticks_left", "ticks_right"), "wheel_speeds": ("v_left", "v_right"),
+                  "gps": ("x", "y", "sigma"), "gyro": ("omega",), "ranges": ("beacon", "range"),
+                  "velocity": ("v", "omega")}
+
 #: states.csv's header line.
 HEADER = ",".join(("t",) + S.NAMES + tuple(f"sigma_{n}" for n in S.NAMES))
 
@@ -59,16 +66,13 @@ def log_lines(log: Log) -> Iterator[str]:
     (equal stamps: in _ORDER, then in file order). Values are written with
     repr, stamps as the absolute float (t + log.t_origin), so reading them
     back gives the log's numbers exactly."""
-    cols = {"encoders": ("ticks_left", "ticks_right"), "wheel_speeds": ("v_left", "v_right"),
-            "gyro": ("omega",), "gps": ("x", "y", "sigma"), "ranges": ("beacon", "range"),
-            "velocity": ("v", "omega")}
     ts, keys, texts = [], [], []
     for rank, name in enumerate(_ORDER):
         obj = getattr(log, name)
         if obj is None or not len(obj.t):
             continue
         parts = []
-        for c in cols[name]:
+        for c in SENSOR_COLUMNS[name]:
             v = getattr(obj, c, None)
             if v is None:
                 continue
