@@ -44,6 +44,7 @@ keeps the isam2 run's fully smoothed estimate in ``final``.
 """
 from __future__ import annotations
 
+import bisect
 import heapq
 import math
 import os
@@ -274,10 +275,7 @@ class Online:
         """The released rows from t_lo on, as a Log."""
         def arrays(sensor):
             rows = self._raw[sensor]
-            i = 0
-            while i < len(rows) and rows[i][0] < t_lo:
-                i += 1
-            rows = rows[i:]
+            rows = rows[bisect.bisect_left(rows, (t_lo,)):]      # (t_lo,) sorts before (t_lo, values)
             if not rows:
                 return None
             return np.array([r[0] for r in rows]), [np.array(c) for c in zip(*(r[1] for r in rows))]
@@ -287,7 +285,7 @@ class Online:
         if (a := arrays("wheel_speeds")) is not None:
             kw["wheel_speeds"] = WheelSpeeds(a[0], *a[1])
         if (a := arrays("gps")) is not None:
-            rows = [r for r in self._raw["gps"] if r[0] >= t_lo]
+            rows = self._raw["gps"][bisect.bisect_left(self._raw["gps"], (t_lo,)):]
             # fixes with and without a sigma: the configured one for those without (LOG_FORMAT)
             sig = (None if all(len(r[1]) == 2 for r in rows)
                    else np.array([r[1][2] if len(r[1]) == 3 else self.robot.gps_sigma for r in rows]))
@@ -355,7 +353,7 @@ class Online:
         if self.ekf is None and self.smoother is None:
             if not final and self.t_released < self.t_first + self.warmup:
                 return []
-            self._start()
+            self._start(final)
         if final:
             b = math.inf
         elif self.smoother is not None:
@@ -374,14 +372,14 @@ class Online:
         self._prune()
         return out
 
-    def _start(self) -> None:
+    def _start(self, final: bool = False) -> None:
         """Warm-up done: the whole-log decisions on the rows so far (see the module doc)."""
         log = self._log(-math.inf)
         if log.encoders is None and log.wheel_speeds is None:
             raise OdomgraphError(f"no encoders or wheel_speeds in the first {self.warmup:g} s of the stream: "
                                  "nothing to estimate from")
         if self.method is not Method.ekf:
-            self.smoother = _Smoother(self, log)
+            self.smoother = _Smoother(self, log, final)
             return
         self.ekf = EKF(log, self.schedule, self.options)
         self.ekf.begin()
@@ -502,7 +500,7 @@ class Online:
 class _Smoother:
     """isam2 or fixed-lag, one keyframe at a time (see the module doc)."""
 
-    def __init__(self, online: Online, log: Log):
+    def __init__(self, online: Online, log: Log, final: bool = False):
         from odomgraph.estimators.batch import build_problem
         from odomgraph.estimators.growing import GrowingProblem
         from odomgraph.estimators.incremental import FixedLagRunner, ISAM2Runner
@@ -518,10 +516,10 @@ class _Smoother:
         # the keyframes of the whole log are every step-th wheel row from `first` on
         self.kf_times = [float(t) for t in wheel.t[self.first::self.step]]
         self.t_start = min(float(s.t[0]) for s in log.sensors() if len(s.t))
-        b = online._final_before()
-        # final: interval j ends at t_{j+1} < b, and keyframe j+2 is one of the log's
+        b = math.inf if final else online._final_before(SPIKE_HALF)
+        # final: interval j ends at t_{j+1} <= b, and keyframe j+2 is one of the log's
         m = 0
-        while m + 2 < len(self.kf_times) and self.kf_times[m + 1] < b and m + 1 < prob.kf.n - 1:
+        while m + 2 < len(self.kf_times) and self.kf_times[m + 1] <= b and m + 1 < prob.kf.n - 1:
             m += 1
         if m < 2:
             from odomgraph.errors import NotEnoughDataError

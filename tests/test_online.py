@@ -199,6 +199,15 @@ def test_streamed_smoothers_equal_their_replay(name, method):
     np.testing.assert_allclose(live.final.sigma, est.sigma, rtol=0, atol=1e-9)
 
 
+@pytest.mark.parametrize("method", ["ekf", "isam2", "fixed-lag"])
+def test_a_stream_that_ends_inside_its_warm_up(method):
+    """15 s of data, a 25 s warm-up: everything is filtered at close, as the replay does."""
+    log = simulate(paper(15), 3)
+    sch = Schedule(calibrate_until=20.0)
+    est = estimate(log, method, sch)
+    _assert_rows_equal(_stream(log, sch, method=method)[1], est.online if method == "isam2" else est)
+
+
 def test_batch_cannot_stream_and_says_so():
     log = simulate(paper(5), 1)
     with pytest.raises(OptionError, match="cannot stream"):

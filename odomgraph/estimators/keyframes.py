@@ -302,10 +302,12 @@ def build_keyframes(log: Log, t_start: float, keyframe_hz: float, causal: bool =
     # Forward travel (mean of the wheels) and turning (their difference) at the keyframes.
     fwd = travel.mean(1)
     turn = travel[:, 1] - travel[:, 0]
-    # More than two ticks [m]. The half tick keeps whole tick counts off the
-    # threshold: at exactly two, rounding in the cumulative travel decided,
-    # and a stream (whose windows sum from another origin) decided otherwise.
-    eps = 2.5 / max(r.ticks_per_meter_left, r.ticks_per_meter_right, 1.0)
+    # More than two ticks [m]. The quarter tick keeps tick counts off the
+    # threshold: forward travel is a mean of two wheels' whole ticks, so it
+    # moves in half ticks, and at exactly a count on that grid rounding in
+    # the cumulative travel decided (a stream, whose windows sum from another
+    # origin, decided otherwise).
+    eps = 2.25 / max(r.ticks_per_meter_left, r.ticks_per_meter_right, 1.0)
 
     def effective(k, ts):
         """(len, 2) effective (tau_v, tau_omega) of times ts in intervals k."""
