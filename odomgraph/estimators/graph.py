@@ -108,35 +108,54 @@ class Problem:
         self.rows_unary = 2 + 1 + 2 + 2 + 2 * self.g_max + self.r_max
         self.gps_slot = _slots(kf.gps_k)
         self.rng_slot = _slots(kf.rng_k)
-        self._rw_whiten = self._random_walk_whiteners()
+        dt = kf.dt
+        # the last interval has no next one and counts its own dt twice
+        self.rw = RandomWalkSteps.of(self.robot.process, self.q_slip, walk_span(dt, np.append(dt[1:], dt[-1])))
         self.motion_whiten = 1.0 / motion_sigma(kf, self.robot.process.yaw_accel**2)
 
-    def _random_walk_whiteners(self) -> np.ndarray:
-        """(N-1, 8, 8) inverse Cholesky factors of each W random-walk step covariance
-        (random_walk_cov; the last interval has no next one and counts its own dt twice)."""
-        dt = self.kf.dt
-        self.rw_cov, whiten = random_walk_cov(self.robot.process, self.q_slip, dt, np.append(dt[1:], dt[-1]))
-        return whiten
+
+def walk_span(dt: np.ndarray, dt_next: np.ndarray) -> np.ndarray:
+    """(K,) [s] what the W random walk from interval k to k+1 spans: the
+    difference of two adjacent interval averages of a random walk of
+    intensity q has variance q (dt_k + dt_{k+1}) / 3."""
+    return (dt + dt_next) / 3.0
 
 
-def random_walk_cov(pn, q_slip: np.ndarray, dt: np.ndarray, dt_next: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(K, 8, 8) covariance of the W random-walk step from interval k to k+1,
-    and its inverse Cholesky factor, for intervals of dt (K,) [s] followed by
-    ones of dt_next (K,) [s]. ``pn``: ProcessNoise; q_slip (2, 2) [(m/s)^2/s].
+@dataclass(frozen=True)
+class RandomWalkSteps:
+    """The W random-walk step covariance of every interval: one unit
+    covariance (the intensities of ProcessNoise and the slip's (2, 2) block
+    per second, 8 x 8) times each interval's span [s] (walk_span). An
+    interval costs one float, not two 8 x 8 matrices: a stream's problem
+    grows for hours (estimators.growing)."""
+    unit: np.ndarray
+    """(8, 8) covariance per second of span."""
+    unit_whiten: np.ndarray
+    """(8, 8) inverse Cholesky factor of ``unit``."""
+    span: np.ndarray
+    """(N-1,) [s]."""
 
-    The difference of two adjacent interval averages of a random walk of
-    intensity q has variance q (dt_k + dt_{k+1}) / 3.
-    """
-    span = (dt + dt_next) / 3.0
-    Q = np.zeros((len(dt), 8, 8))
-    Q[:, 0, 0] = pn.accel**2 * span
-    Q[:, 1, 1] = pn.yaw_accel**2 * span
-    Q[:, 2, 2] = pn.gyro_bias**2 * span
-    Q[:, 3:5, 3:5] = q_slip[None] * span[:, None, None]
-    qs = max(pn.scale, SCALE_FLOOR) ** 2
-    for i in (5, 6, 7):
-        Q[:, i, i] = qs * span
-    return Q, np.linalg.inv(np.linalg.cholesky(Q))
+    @staticmethod
+    def unit_cov(pn, q_slip: np.ndarray) -> np.ndarray:
+        """(8, 8): ProcessNoise ``pn``'s intensities squared, q_slip (2, 2) [(m/s)^2/s] on the slips."""
+        Q = np.zeros((8, 8))
+        Q[0, 0], Q[1, 1], Q[2, 2] = pn.accel**2, pn.yaw_accel**2, pn.gyro_bias**2
+        Q[3:5, 3:5] = q_slip
+        Q[5, 5] = Q[6, 6] = Q[7, 7] = max(pn.scale, SCALE_FLOOR) ** 2
+        return Q
+
+    @classmethod
+    def of(cls, pn, q_slip: np.ndarray, span: np.ndarray) -> "RandomWalkSteps":
+        Q = cls.unit_cov(pn, q_slip)
+        return cls(Q, np.linalg.inv(np.linalg.cholesky(Q)), span)
+
+    def cov(self, k) -> np.ndarray:
+        """(8, 8) covariance of interval k's step (or (K, 8, 8) for a slice)."""
+        return np.multiply.outer(self.span[k], self.unit)
+
+    def whiten(self, k) -> np.ndarray:
+        """Its inverse Cholesky factor, (8, 8) or (K, 8, 8)."""
+        return np.multiply.outer(1.0 / np.sqrt(self.span[k]), self.unit_whiten)
 
 
 #: Default thresholds [sigma] of the measurement losses. Cauchy at 5 sigma is
@@ -210,7 +229,7 @@ def walk_rows(prob: Problem, W: np.ndarray, k0: int, k1: int):
     anchored (Problem.wheel_speed_units). Shared by batch (linearize) and the
     incremental smoothers, which give GTSAM the same rows."""
     w0, w1 = W[k0:k1], W[k0 + 1:k1 + 1]
-    A_w = prob._rw_whiten[k0:k1]
+    A_w = prob.rw.whiten(slice(k0, k1))
     b_w = -np.einsum("kij,kj->ki", A_w, w1 - w0)
     A_w0, A_w1 = -A_w, A_w.copy()
     if prob.wheel_speed_units:

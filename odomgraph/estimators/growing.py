@@ -10,7 +10,7 @@ a keyframe so that its keyframes are the log's), into buffers that double
 when full: appending costs O(1), not a copy of the history.
 
 An interval k is final when keyframe k+2 is known (the random walk from W_k
-to W_{k+1} spans both intervals, graph.random_walk_cov) and every
+to W_{k+1} spans both intervals, graph.walk_span) and every
 measurement up to t_{k+1} is (the cleaning reads a few rows ahead).
 """
 from __future__ import annotations
@@ -20,7 +20,7 @@ from dataclasses import fields, replace
 import numpy as np
 
 from odomgraph.estimators.batch import zero_slip_intervals
-from odomgraph.estimators.graph import Problem, motion_sigma, random_walk_cov
+from odomgraph.estimators.graph import Problem, RandomWalkSteps, motion_sigma, walk_span
 from odomgraph.estimators.keyframes import Keyframes, build_keyframes
 from odomgraph.estimators.measurements import clean
 from odomgraph.io.log import Log
@@ -73,8 +73,8 @@ class GrowingProblem:
         arrays = {f.name: getattr(kf, f.name) for f in fields(kf)}
         if arrays["gps_t"] is None:
             arrays["gps_t"] = np.zeros(len(kf.gps_k))
-        arrays.update(zero_slip=p.zero_slip, rw_cov=p.rw_cov, rw_whiten=p._rw_whiten,
-                      motion_whiten=p.motion_whiten, gps_slot=p.gps_slot, rng_slot=p.rng_slot,
+        self.walks = p.rw                    # its unit covariance; the spans grow here
+        arrays.update(zero_slip=p.zero_slip, walk_span=p.rw.span, motion_whiten=p.motion_whiten, gps_slot=p.gps_slot, rng_slot=p.rng_slot,
                       no_slip=np.zeros(len(p.zero_slip), bool))
         self.buf = _Buffers(arrays)
         # the last interval's walk spans to t_next: redo it with the real next dt
@@ -102,10 +102,7 @@ class GrowingProblem:
         return replace(prob, kf=Keyframes(**kw), zero_slip=prob.zero_slip[:m]), float(kf.t[m + 1])
 
     def _set_walk(self, j: int, dt: float, dt_next: float) -> None:
-        p = self.problems[0]
-        Q, L = random_walk_cov(p.robot.process, p.q_slip, np.array([dt]), np.array([dt_next]))
-        self.buf.view("rw_cov")[j] = Q[0]
-        self.buf.view("rw_whiten")[j] = L[0]
+        self.buf.view("walk_span")[j] = walk_span(np.array([dt]), np.array([dt_next]))[0]
 
     def append(self, piece: Keyframes, w: int, t_next: float | None, log_t_start: float) -> None:
         """Interval ``w`` of ``piece`` (the keyframes of a window that starts at
@@ -132,8 +129,7 @@ class GrowingProblem:
         t = b.view("t")
         b.append("zero_slip", zero_slip_intervals(t[j:j + 2], p.init, log_t_start, self.schedule))
         b.append("motion_whiten", 1.0 / motion_sigma(piece, p.robot.process.yaw_accel**2)[w:w + 1])
-        b.append("rw_cov", np.zeros((1, 8, 8)))
-        b.append("rw_whiten", np.zeros((1, 8, 8)))
+        b.append("walk_span", np.zeros(1))
         b.append("no_slip", np.zeros(1, bool))
         self._publish(g.size, r.size)
         if t_next is not None:
@@ -155,7 +151,8 @@ class GrowingProblem:
             p.kf = kf
             # the graph's linearisation copies carry no slip priors (incremental._Graph)
             p.zero_slip = b.view("zero_slip") if i == 0 else b.view("no_slip")
-            p.rw_cov, p._rw_whiten, p.motion_whiten = b.view("rw_cov"), b.view("rw_whiten"), b.view("motion_whiten")
+            p.rw = replace(self.walks, span=b.view("walk_span"))
+            p.motion_whiten = b.view("motion_whiten")
             p.gps_slot, p.rng_slot = b.view("gps_slot"), b.view("rng_slot")
             # the row layout only grows: padding rows are dropped before GTSAM sees them
             p.g_max = max(p.g_max, g_max)

@@ -321,7 +321,7 @@ class _Graph:
         prob = self.prob
         g = gtsam.NonlinearFactorGraph()
         if not prob.wheel_speed_units:         # else: linear factors (walk_factors)
-            Q = prob.rw_cov[k]
+            Q = prob.rw.cov(k)
             g.add(gtsam.BetweenFactorVector(W_KEY(k), W_KEY(k + 1), np.zeros(6),
                                             gtsam.noiseModel.Gaussian.Covariance(Q[np.ix_(W_IDX, W_IDX)])))
             g.add(gtsam.BetweenFactorVector(S_KEY(k), S_KEY(k + 1), np.zeros(2),
