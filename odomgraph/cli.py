@@ -781,23 +781,35 @@ def stream(
     """
     from odomgraph.livestream import check_resume, run_stream, summary_lines
     from odomgraph.online import Online
+    if history is not None and method is MethodName.ekf:
+        raise _click_exc.UsageError("--history: only isam2 and fixed-lag smooth the whole stream")
+    for p in (checkpoint, history):
+        if p is not None and not p.parent.is_dir():
+            raise _click_exc.UsageError(f"{p}: its directory does not exist")
     if resume is not None:
         live = Online.load(resume)
         check_resume(live, method.value)
+        if robot is not None or warmup is not None or gate is not None or keyframe_hz is not None or lag is not None:
+            typer.echo("odomgraph: warning: --resume goes on with the checkpoint's robot and options; --robot, "
+                       "--warmup, --gate, --keyframe-hz and --lag are ignored", err=True)
     else:
         from odomgraph.io.robot import load_robot
         if robot is None and replay is None:
             raise _click_exc.UsageError("give --robot robot.toml (or --replay LOG, whose robot.toml is used)")
         live = Online(load_robot(robot if robot is not None else replay / "robot.toml"), method.value,
                       _parse_schedule(calibrate_until, hold), latency=latency, warmup=warmup,
-                      journal=checkpoint is not None, gate=gate, keyframe_hz=keyframe_hz, lag=lag,
+                      journal=checkpoint is not None and method is not MethodName.ekf,  # (an EKF pickles)
+                      gate=gate, keyframe_hz=keyframe_hz, lag=lag,
                       slip_cauchy=slip_cauchy, robust=robust.value if robust else None, robust_k=robust_k)
     if replay is not None:
         from odomgraph.io.log import read_log
         from odomgraph.io.stream import log_lines
         lines, source = log_lines(read_log(replay)), str(replay)
     else:
-        lines, source = sys.stdin, "stdin"
+        import io
+        # universal newlines (a bare CR ends a line too); bytes that are no UTF-8 become a bad line
+        lines = io.TextIOWrapper(sys.stdin.buffer, encoding="utf-8", errors="replace", newline=None)
+        source = "stdin"
     st = run_stream(live, lines, sys.stdout, sys.stderr, source=source, rate=rate, speed=speed,
                     checkpoint=checkpoint, checkpoint_every=checkpoint_every,
                     skip_lines=live.lines_read if (resume is not None and replay is not None) else 0)

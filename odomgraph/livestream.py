@@ -47,7 +47,7 @@ def run_stream(online: Online, lines: Iterable[str], out: IO[str], err: IO[str],
     out.write(HEADER + "\n")
     out.flush()
     next_t = [-math.inf]
-    said = [len(online.ekf.recoveries) if online.ekf is not None else 0, len(online.restarts)]
+    said = [len(online.ekf.recoveries) if online.ekf is not None else 0, len(online.restarts), len(online.alerts)]
     wall0 = t_first = None
     last_ckpt = None
 
@@ -67,6 +67,11 @@ def run_stream(online: Online, lines: Iterable[str], out: IO[str], err: IO[str],
                 err.write(f"odomgraph: recovered: {msg}\n")
             said[0] = len(eng.recoveries)
             err.flush()
+        if len(online.alerts) > said[2]:
+            for msg in online.alerts[said[2]:]:
+                err.write(f"odomgraph: warning: {msg}\n")
+            said[2] = len(online.alerts)
+            err.flush()
         if len(online.restarts) > said[1]:
             for msg in online.restarts[said[1]:]:
                 err.write(f"odomgraph: restarted: {msg}\n")
@@ -84,17 +89,17 @@ def run_stream(online: Online, lines: Iterable[str], out: IO[str], err: IO[str],
             if parsed is None:
                 continue
             sensor, stamp, values = parsed
-            try:
-                t = float(stamp)
-            except ValueError:
-                raise StreamInputError(f"time {stamp!r} is not a number") from None
             if speed > 0:
+                try:
+                    t = float(stamp)
+                except ValueError:
+                    raise StreamInputError(f"time {stamp!r} is not a number") from None
                 if wall0 is None:
                     wall0, t_first = time.monotonic(), t
                 wait = wall0 + (t - t_first) / speed - time.monotonic()
                 if wait > 0:
                     time.sleep(wait)
-            rows = online.push(sensor, t, *values)
+            rows = online.push(sensor, stamp, *values)       # the text: a real clock's stamp read exactly
         except (LineError, StreamInputError) as exc:
             st.skipped_bad += 1
             if st.skipped_bad <= SAY_BAD_LINES:
@@ -132,7 +137,8 @@ def summary_lines(online: Online, st: StreamStats) -> list[str]:
     out.append(f"stream: {st.lines} lines, {st.rows} rows written; used: {counts(s['accepted'])}")
     for key, what in (("rejected_by_gate", "rejected by the gate"),
                       ("rejected_late", f"rejected, older than the {s['latency_s']:g} s latency window"),
-                      ("repeated_stamps", "dropped, a stamp the sensor had sent already")):
+                      ("repeated_stamps", "dropped, a stamp the sensor had sent already"),
+                      ("rejected_ahead", f"rejected, stamped far past the newest (a clock ahead?)")):
         if s[key]:
             out.append(f"stream: {what}: {counts(s[key])}")
     if st.skipped_bad:

@@ -61,9 +61,9 @@ from odomgraph.estimators.initial import CONSENSUS_WINDOW
 from odomgraph.estimators.measurements import from_log
 from odomgraph.estimators.registry import REGISTRY, Method, check_option_names, parse_method
 from odomgraph.estimators.schedule import Schedule
-from odomgraph.estimators.sensors import SENSOR_NAMES, WHEEL, event_stream
+from odomgraph.estimators.sensors import DOF, SENSOR_NAMES, WHEEL, event_stream
 from odomgraph.estimators.slipcheck import in_stretches
-from odomgraph.io.csvtable import ORIGIN_ABOVE
+from odomgraph.io.csvtable import ORIGIN_ABOVE, ORIGIN_BELOW, split_stamps
 from odomgraph.io.log import Encoders, Gps, Gyro, Log, Ranges, Velocity, WheelSpeeds
 from odomgraph.io.stream import SENSOR_COLUMNS
 from odomgraph.io.robot import RobotConfig
@@ -76,10 +76,57 @@ AHEAD_ROWS = SPIKE_HALF + 1
 #: A sensor whose newest row is this much older than the newest data [s] has
 #: stopped (a dropout): the filter no longer waits for its rows ahead.
 STOPPED_AFTER = 1.0
+#: A stamp this far [s] past the newest is held, not taken as the new time,
+#: until another sensor's confirm it (a whole system that paused): one stray
+#: stamp (a driver's garbage, a sensor whose clock runs ahead) would else make
+#: every later measurement "late".
+MAX_AHEAD = 2.0
+#: Measurements from that far ahead that confirm a new time: from two sensors,
+#: or this many in a row from a stream of one.
+CONFIRM_AHEAD = 3
+#: The encoders may be silent this long [s] before the filter goes on without
+#: them (an encoder row closes the interval since the one before, so its
+#: event lies inside the gap, before everything that came meanwhile).
+WHEEL_WAIT = 30.0
+#: A sensor's mean NIS over the stream beyond this many times its dimension:
+#: the estimate's sigma understates its error, and the summary says so.
+NIS_WARN = 3.0
 #: Restarts after a divergence (Online._restart) before the stream gives up and says why.
 MAX_RESTARTS = 20
 #: Margin [s] past the calibration window (or start-pose fit) that the warm-up adds.
 WARMUP_MARGIN = 5.0
+
+
+def _number(v) -> float | None:
+    """A float from a number or its decimal text (as read_log reads one: no
+    '1_0', no hex), or None."""
+    if isinstance(v, (int, float)) and not isinstance(v, bool):
+        return float(v)
+    text = str(v).strip()
+    if "_" in text or text.lower().startswith(("0x", "-0x", "+0x")):
+        return None
+    try:
+        return float(text)
+    except ValueError:
+        return None
+
+
+def stamp_parts(t) -> tuple[int, float, float]:
+    """(whole seconds, fraction in [0, 1), the stamp as a float) of a stamp
+    given as text or a number. From text the first two are exact, as
+    io.csvtable.split_stamps reads a real clock's stamps ("1700000012.345678"
+    is not float-rounded); a small clock's stamp is read as float(text), as
+    read_log reads it."""
+    f = _number(t)
+    if f is None or not math.isfinite(f):
+        raise StreamInputError(f"time {t!r} is not a finite number")
+    if abs(f) >= ORIGIN_BELOW:
+        raise StreamInputError(f"time {t!r} is no time in seconds (nanoseconds?)")
+    if isinstance(t, str):
+        sec, frac = split_stamps([t.strip()])
+        return int(sec[0]), float(frac[0]), f
+    sec = math.floor(f)
+    return int(sec), f - sec, f
 
 
 class StreamInputError(OdomgraphError):
@@ -110,6 +157,7 @@ class _Counts:
     rejected: dict[str, int] = field(default_factory=dict)   # by the filter's gate
     late: dict[str, int] = field(default_factory=dict)       # older than the latency window
     repeated: dict[str, int] = field(default_factory=dict)   # a stamp the sensor sent already
+    ahead: dict[str, int] = field(default_factory=dict)      # stamped far past the newest, not followed
 
     @staticmethod
     def add(d: dict, key: str, n: int = 1) -> None:
@@ -137,7 +185,8 @@ class Online:
         if method is Method.batch:
             raise OptionError("batch smooths a whole log and cannot stream; stream with --method isam2, "
                               "fixed-lag or ekf")
-        for name, v in (("latency", latency), ("chunk", chunk), ("context", context)):
+        for name, v in (("latency", latency), ("chunk", chunk), ("context", context),
+                        ("warmup", 0.0 if warmup is None else warmup)):
             if not (isinstance(v, (int, float)) and math.isfinite(v) and v >= 0):
                 raise OptionError(f"{name} must be seconds >= 0, got {v!r}")
         if method is Method.ekf and schedule.calibrate_until is None:
@@ -148,13 +197,10 @@ class Online:
         self.options = cls(**{k: v for k, v in options.items() if k in cls.__dataclass_fields__ and v is not None})
         self.robot, self.schedule, self.method = robot, schedule, method
         self.latency, self.chunk, self.context = float(latency), max(float(chunk), 1e-6), float(context)
-        if warmup is None:
-            warmup = 2.0
-            if schedule.calibrate_until is not None:
-                warmup = max(warmup, schedule.calibrate_until + WARMUP_MARGIN)
-            if robot.initial is None:
-                warmup = max(warmup, CONSENSUS_WINDOW + WARMUP_MARGIN)
-        self.warmup = float(warmup)
+        self._warmup_given = warmup is not None
+        self.warmup = float(warmup) if warmup is not None else self._default_warmup()
+        # scale factors of robot (after a restart: the calibration carried) against robot.toml's
+        self._base = np.ones(3)
         self._beacons = {b.id: i for i, b in enumerate(robot.beacons)}
         self._heap: list = []                          # (t, seq, sensor, values) not yet released
         self._seq = 0
@@ -174,9 +220,32 @@ class Online:
         self.closed = False
         self.lines_read = 0         # input lines consumed (odomgraph stream keeps it for --resume)
         self.restarts: list[str] = []   # divergences the estimator did not recover from itself
+        self._ahead: list = []              # (sensor, t, values) held: stamped far past the newest
+        self._sensors_seen: set[str] = set()
+        self._gyro_top: tuple | None = None  # (t, omega) of the largest |rate| so far (the rail test's)
+        self._nis = {}                      # sensor -> [sum of accepted NIS, count, dimension]
+        self.alerts: list[str] = []         # warnings said as they arise (odomgraph stream prints them)
+        self._fail_t = None                 # time of the event being filtered (a divergence's)
         # A smoother's GTSAM state cannot be pickled: its checkpoint is every
         # measurement pushed so far, replayed on load (deterministic, so equal).
         self.journal: list | None = [] if journal else None
+
+    def _default_warmup(self) -> float:
+        """The calibration window, or the start-pose fit without [initial], plus WARMUP_MARGIN; at least 2 s."""
+        w = 2.0
+        if self.schedule.calibrate_until is not None:
+            w = max(w, self.schedule.calibrate_until + WARMUP_MARGIN)
+        if self.robot.initial is None:
+            w = max(w, CONSENSUS_WINDOW + WARMUP_MARGIN)
+        return w
+
+    def _row(self, t: float, mean: np.ndarray, sigma: np.ndarray, pose_cov) -> OnlineRow:
+        """An output row; its scale factors against robot.toml's (a restart carries them in the robot)."""
+        if not np.all(self._base == 1.0):
+            mean, sigma = mean.copy(), sigma.copy()
+            mean[8:11] *= self._base
+            sigma[8:11] *= self._base
+        return OnlineRow(float(t), mean, sigma, pose_cov, self.t_origin or 0)
 
     # ------------------------------------------------------------ input
     def push(self, sensor: str, t: float, *values) -> list[OnlineRow]:
@@ -185,14 +254,24 @@ class Online:
         if self.closed:
             raise OdomgraphError("push after close()")
         vals = self._values(sensor, values)
+        try:
+            sec, frac, f = stamp_parts(t)
+        except StreamInputError as exc:
+            raise StreamInputError(f"{sensor}: {exc}") from None
         if self.journal is not None:
             self.journal.append((sensor, t, values))
-        t = float(t)
-        if not math.isfinite(t):
-            raise StreamInputError(f"{sensor}: time {t!r} is not a finite number")
         if self.t_origin is None:
-            self.t_origin = int(math.floor(t)) if abs(t) >= ORIGIN_ABOVE else 0
-        t -= self.t_origin
+            self.t_origin = sec if abs(sec) >= ORIGIN_ABOVE else 0
+        # as read_log reads a stamp: on a real clock, whole seconds from the origin, then the fraction (exact)
+        t = float(sec - self.t_origin) + frac if self.t_origin else f
+        self._sensors_seen.add(sensor)
+        if self.t_newest > -math.inf and t > self.t_newest + MAX_AHEAD:
+            return self._hold_ahead(sensor, t, vals)
+        if self._ahead:
+            self._drop_ahead()
+        return self._accept(sensor, t, vals)
+
+    def _accept(self, sensor: str, t: float, vals: tuple) -> list[OnlineRow]:
         if t < self.t_released:
             _Counts.add(self.counts.late, sensor)
             return []
@@ -202,6 +281,29 @@ class Online:
             self.t_newest = t
         self._release(self.t_newest - self.latency)
         return self._advance(final=False)
+
+    def _hold_ahead(self, sensor: str, t: float, vals: tuple) -> list[OnlineRow]:
+        """A stamp far past the newest: held until others confirm the new time."""
+        self._ahead.append((sensor, t, vals))
+        sensors = {s for s, _, _ in self._ahead}
+        if len(sensors) >= 2 or (len(self._sensors_seen) == 1 and len(self._ahead) >= CONFIRM_AHEAD):
+            held, self._ahead = self._ahead, []
+            self.alerts.append(f"the clock jumped {held[0][1] - self.t_newest:.3g} s ahead at t={held[0][1]:.3f} s "
+                               f"({', '.join(sorted(sensors))} agree); going on from there")
+            out = []
+            for s_, t_, v_ in held:
+                out += self._accept(s_, t_, v_)
+            return out
+        return []
+
+    def _drop_ahead(self) -> None:
+        """Held stamps that the stream did not follow: rejected and counted."""
+        for s_, t_, _ in self._ahead:
+            if not self.counts.ahead.get(s_):
+                self.alerts.append(f"{s_}: a measurement stamped t={t_:.3f} s, {t_ - self.t_newest:.3g} s past "
+                                   "the newest, rejected (a clock ahead?); such are counted")
+            _Counts.add(self.counts.ahead, s_)
+        self._ahead = []
 
     def encoders(self, t: float, ticks_left: float, ticks_right: float) -> list[OnlineRow]:
         return self.push("encoders", t, ticks_left, ticks_right)
@@ -238,15 +340,16 @@ class Online:
                                            f"{', '.join(self._beacons) or 'none'})")
                 out.append(self._beacons[key])
                 continue
-            try:
-                f = float(v)
-            except (TypeError, ValueError):
-                raise StreamInputError(f"{sensor}: {name} {v!r} is not a number") from None
+            f = _number(v)
+            if f is None:
+                raise StreamInputError(f"{sensor}: {name} {v!r} is not a number")
             if not math.isfinite(f):
                 raise StreamInputError(f"{sensor}: {name} is {f!r}")
             out.append(f)
         if sensor == "gps" and len(out) == 3 and not out[2] > 0:
             raise StreamInputError(f"gps: sigma must be > 0, got {out[2]!r}")
+        if sensor == "ranges" and not out[1] >= 0:
+            raise StreamInputError(f"ranges: range must be >= 0, got {out[1]!r}")
         return tuple(out)
 
     def _release(self, until: float) -> None:
@@ -265,7 +368,16 @@ class Online:
             rows.append((t, vals))
             if self.t_first is None or t < self.t_first:
                 self.t_first = t
+            if sensor == "gyro" and (self._gyro_top is None or abs(vals[0]) > abs(self._gyro_top[1][0])):
+                self._gyro_top = (t, vals)
             if sensor in ("encoders", "wheel_speeds"):
+                if sensor == "encoders" and len(rows) >= 2 and rows[-2][0] + 1e-9 < self.t_done \
+                        and 0.5 * (rows[-2][0] + t) < self.t_done:
+                    # the encoders were silent past WHEEL_WAIT: the filter went on, and this
+                    # row's interval (its event mid-gap) lies behind it
+                    _Counts.add(self.counts.late, sensor)
+                    self.alerts.append(f"encoders: silent from t={rows[-2][0]:.2f} to {t:.2f} s; the filter went "
+                                       "on without them, and the row that ended the gap was dropped")
                 if self.smoother is not None:
                     self.smoother.wheel_row(self._wheel_rows, t)
                 self._wheel_rows += 1
@@ -275,7 +387,17 @@ class Online:
         """The released rows from t_lo on, as a Log."""
         def arrays(sensor):
             rows = self._raw[sensor]
-            rows = rows[bisect.bisect_left(rows, (t_lo,)):]      # (t_lo,) sorts before (t_lo, values)
+            i = bisect.bisect_left(rows, (t_lo,))                 # (t_lo,) sorts before (t_lo, values)
+            if sensor in ("encoders", "wheel_speeds"):
+                # the rows the cleaning reads before the window's first, however old: an
+                # encoder row's interval starts at the row before it (a dropout's too)
+                i = max(i - SPIKE_HALF - 1, 0)
+            rows = rows[i:]
+            if sensor == "gyro" and rows and self._gyro_top is not None and self._gyro_top[0] < rows[0][0]:
+                # The rail test (measurements.saturated) takes the largest |rate| of the log as the
+                # rail: a window's own largest is no rail. The largest so far, at its own time before
+                # the window, stands in; it lies before every event the window is read for.
+                rows = [self._gyro_top] + rows
             if not rows:
                 return None
             return np.array([r[0] for r in rows]), [np.array(c) for c in zip(*(r[1] for r in rows))]
@@ -307,7 +429,8 @@ class Online:
             b -= off                          # a later fix is stamped late: it belongs earlier
         for sensor in ("encoders", "wheel_speeds", "gyro"):
             rows = self._raw[sensor]
-            if not rows or rows[-1][0] < self.t_released - STOPPED_AFTER:
+            wait = WHEEL_WAIT if sensor == "encoders" else STOPPED_AFTER
+            if not rows or rows[-1][0] < self.t_released - wait:
                 continue
             if len(rows) <= ahead:
                 return -math.inf
@@ -327,25 +450,46 @@ class Online:
 
     def _restart(self, exc: Exception) -> None:
         """The estimator diverged beyond its own recoveries: a robot still
-        needs an estimate, so start again on the data from the last row on,
-        at that row's pose with a wide sigma (or as at the start, before any
-        row), with robot.toml's parameters: the diverged run's are suspect."""
+        needs an estimate, so start again on the data from the failing event
+        on, at the last row's pose with a wide sigma (or as at the start,
+        before any row). The calibration so far is kept (the last row's
+        scale factors, where they are plausible: within 10 % of nominal):
+        the EKF holds them (slip only: calibrate_until 0, a short warm-up),
+        a smoother calibrates again around them. Rows still give the scale
+        factors against robot.toml's."""
+        from dataclasses import replace as dc_replace
         from odomgraph.io.robot import InitialPose
-        t_r = self.last.t if self.last is not None else self.t_first
+        # from the failing event on (the rows of the chunk that failed are the diverging ones)
+        t_r = max(self.last.t if self.last is not None else self.t_first, self._fail_t or -math.inf)
         if self.last is not None:
             x, y, th = (float(v) for v in self.last.mean[:3])
             sx, sy, sth = (float(v) for v in self.last.sigma[:3])
+            sc = self.last.mean[8:11]
+            if np.all(np.abs(sc - 1.0) < 0.1):
+                r = self.robot
+                self.robot = r.with_(ticks_per_meter_left=r.ticks_per_meter_left * float(sc[0] / self._base[0]),
+                                     ticks_per_meter_right=r.ticks_per_meter_right * float(sc[1] / self._base[1]),
+                                     track_width=r.track_width * float(sc[2] / self._base[2]))
+                self._base = np.array(sc, float)
             self.robot = self.robot.with_(initial=InitialPose(x, y, th, (max(3 * sx, 1.0), max(3 * sy, 1.0),
                                                                          max(3 * sth, 0.5))))
+        if self.method is Method.ekf:
+            # the EKF holds them from the start (slip only); a smoother has no hold, and calibrates again
+            # with them as its prior's centre
+            self.schedule = dc_replace(self.schedule, calibrate_until=0.0)
+        if not self._warmup_given:
+            self.warmup = self._default_warmup()
         for rows in self._raw.values():
             while rows and rows[0][0] < t_r:
                 del rows[0]
+        g = self._raw["gyro"]
+        self._gyro_top = max(g, key=lambda r: abs(r[1][0])) if g else None    # the rail test's, from here on
         firsts = [rows[0][0] for rows in self._raw.values() if rows]
         self.t_first = min(firsts) if firsts else None
         self.ekf = self.smoother = None
         self.t_done = -math.inf
         self.restarts.append(f"t={t_r:.2f} s: {' '.join(str(exc).split())}; restarted from the last estimate's "
-                             f"pose (sigma widened), warming up again for {self.warmup:g} s")
+                             f"pose (sigma widened) and scale factors, warming up again for {self.warmup:g} s")
 
     def _advance_once(self, final: bool) -> list[OnlineRow]:
         if self.t_first is None:
@@ -375,9 +519,12 @@ class Online:
     def _start(self, final: bool = False) -> None:
         """Warm-up done: the whole-log decisions on the rows so far (see the module doc)."""
         log = self._log(-math.inf)
-        if log.encoders is None and log.wheel_speeds is None:
-            raise OdomgraphError(f"no encoders or wheel_speeds in the first {self.warmup:g} s of the stream: "
-                                 "nothing to estimate from")
+        wheel = log.encoders if log.encoders is not None else log.wheel_speeds
+        if wheel is None or len(wheel.t) < 3:
+            from odomgraph.errors import NotEnoughDataError
+            raise NotEnoughDataError(f"{0 if wheel is None else len(wheel.t)} encoder or wheel_speeds rows in the "
+                                     f"first {self.warmup:g} s of the stream (or all of it): nothing to estimate "
+                                     "from")
         if self.method is not Method.ekf:
             self.smoother = _Smoother(self, log, final)
             return
@@ -397,11 +544,24 @@ class Online:
         counts = self.counts
         for k in range(n):
             code = int(code_ev[k])
+            self._fail_t = float(t_ev[k])
             nis = ekf.step(t_ev[k], code, *event_values(meas, code, row_ev[k]), in_slip=bool(slip[k]))
-            _Counts.add(counts.accepted if nis >= 0 else counts.rejected, SENSOR_NAMES[code])
+            name = SENSOR_NAMES[code]
+            _Counts.add(counts.accepted if nis >= 0 else counts.rejected, name)
+            if nis >= 0:
+                acc = self._nis.setdefault(name, [0.0, 0, DOF[code], False])
+                acc[0] += nis
+                acc[1] += 1
+                # the filter's own running mean (its divergence watch's): said once per sensor when the
+                # rows' sigma stop covering what the sensor sees, well before the watch gives up
+                ema = ekf._nis_ema[code]
+                if not acc[3] and ekf._n_seen[code] > 100 and ema > NIS_WARN * DOF[code]:
+                    acc[3] = True
+                    self.alerts.append(f"{name}: the running mean NIS is {ema:.0f} (expected {DOF[code]}) at "
+                                       f"t={t_ev[k]:.2f} s: the rows' sigma understate their error from here")
             if code == WHEEL:
                 x, var, pc = ekf.row()
-                out.append(OnlineRow(float(t_ev[k]), x, np.sqrt(np.maximum(var, 0.0)), pc, self.t_origin or 0))
+                out.append(self._row(t_ev[k], x, np.sqrt(np.maximum(var, 0.0)), pc))
         for note in meas.notes:
             if note not in self.notes:
                 self.notes.append(note)
@@ -446,6 +606,10 @@ class Online:
             warnings = list(self.ekf.init.warnings) + list(self.ekf.window_warnings)
         elif self.smoother is not None:
             warnings = list(self.smoother.runner.prob.init.warnings)
+        for k, v in self._nis.items():
+            if v[1] >= 100 and v[0] / v[1] > NIS_WARN * v[2]:
+                warnings.append(f"{k}: mean NIS {v[0] / v[1]:.1f} over {v[1]} updates, expected {v[2]}: the "
+                                "estimate's sigma understates its error (a clock off, a sigma too small?)")
         accepted = dict(c.accepted)
         if self.smoother is not None:
             from odomgraph.estimators.batch import measurement_counts
@@ -453,7 +617,8 @@ class Online:
         return {"method": self.method.value, "t_origin": self.t_origin or 0, "accepted": accepted,
                 "rejected_by_gate": rejected, "rejected_late": dict(c.late),
                 "repeated_stamps": dict(c.repeated), "recoveries": list(eng.recoveries) if eng else [],
-                "restarts": list(self.restarts),
+                "restarts": list(self.restarts), "rejected_ahead": dict(c.ahead),
+                "mean_nis": {k: {"mean": v[0] / v[1], "dof": v[2], "n": v[1]} for k, v in self._nis.items() if v[1]},
                 "warnings": warnings,
                 "notes": list(self.notes), "warmup_s": self.warmup, "latency_s": self.latency}
 
@@ -477,7 +642,8 @@ class Online:
 
     @staticmethod
     def load(path: Path | str) -> "Online":
-        """An Online from ``save``'s checkpoint."""
+        """An Online from ``save``'s checkpoint. A checkpoint is a pickle:
+        load only your own (unpickling a foreign file can run its code)."""
         path = Path(path)
         try:
             with open(path, "rb") as f:
@@ -489,10 +655,17 @@ class Online:
         if not isinstance(data, dict) or data.get("format") != "odomgraph-online-1":
             raise OdomgraphError(f"{path}: not an odomgraph checkpoint")
         if "online" in data:
+            if not isinstance(data["online"], Online):
+                raise OdomgraphError(f"{path}: not an odomgraph checkpoint")
             return data["online"]
-        live = Online(**data["args"])
-        for sensor, t, values in data["journal"]:
-            live.push(sensor, t, *values)
+        if not isinstance(data.get("args"), dict) or not isinstance(data.get("journal"), list):
+            raise OdomgraphError(f"{path}: not an odomgraph checkpoint")
+        try:
+            live = Online(**data["args"])
+            for sensor, t, values in data["journal"]:
+                live.push(sensor, t, *values)
+        except (TypeError, ValueError, OdomgraphError) as exc:
+            raise OdomgraphError(f"{path}: the checkpoint does not replay ({' '.join(str(exc).split())})") from None
         live.lines_read = data["lines_read"]
         return live
 
@@ -581,6 +754,7 @@ class _Smoother:
         out = []
         ready = r.prob.kf.n - 1 - len(self.no_walk)       # keyframes up to here have their interval
         while self.next_k <= ready:
+            online._fail_t = float(r.prob.kf.t[self.next_k])
             r.advance(self.next_k)
             if self.isam2:
                 out.append(self._online_row(self.next_k, online))
@@ -596,8 +770,7 @@ class _Smoother:
     def _online_row(self, k: int, online: Online) -> OnlineRow:
         r = self.runner
         t = r.prob.kf.t
-        return OnlineRow(float(t[k - 1] + 0.5 * (t[k] - t[k - 1])), r.online[k].copy(), r.online_sigma[k].copy(),
-                         None, online.t_origin or 0)
+        return online._row(t[k - 1] + 0.5 * (t[k] - t[k - 1]), r.online[k].copy(), r.online_sigma[k].copy(), None)
 
     def _harvested(self, online: Online, final: bool) -> list[OnlineRow]:
         """fixed-lag: the rows of the keyframes that left the window (all, at the end)."""
@@ -613,9 +786,12 @@ class _Smoother:
             k1 += 1
         if k1 <= self._emitted:
             return []
-        # (honest_blocks is the identity unless scale combinations are pinned)
-        rows = keyframe_rows(r.prob, r.pose[:n], r.W[:n], honest_blocks(r.prob, r.Sig[:n]), r.method,
-                             slice(self._emitted, k1))
+        Sig = r.Sig[:n]
+        if r.prob.init.observability.unobservable:
+            # pinned scale combinations: their prior sigma given back, on the harvested keyframes only
+            # (the others' blocks are still zero); honest_blocks is the identity otherwise
+            Sig = Sig.copy()
+            Sig[self._emitted:k1] = honest_blocks(r.prob, Sig[self._emitted:k1])
+        rows = keyframe_rows(r.prob, r.pose[:n], r.W[:n], Sig, r.method, slice(self._emitted, k1))
         self._emitted = k1
-        return [OnlineRow(float(rows.t[i]), rows.mean[i], rows.sigma[i], rows.pose_cov[i], online.t_origin or 0)
-                for i in range(len(rows.t))]
+        return [online._row(rows.t[i], rows.mean[i], rows.sigma[i], rows.pose_cov[i]) for i in range(len(rows.t))]

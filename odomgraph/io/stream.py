@@ -16,6 +16,7 @@ row per estimate, formatted exactly as ``write_states`` formats states.csv.
 """
 from __future__ import annotations
 
+import math
 from typing import Iterator
 
 import numpy as np
@@ -57,6 +58,20 @@ def row_line(t: float, mean: np.ndarray, sigma: np.ndarray, t_origin: int = 0) -
     return ",".join([stamp, *np.char.mod("%.9g", np.concatenate([mean, sigma])).tolist()])
 
 
+def exact_stamp(t: float, origin: int = 0) -> str:
+    """The absolute stamp of t [s since the integer second ``origin``] as
+    text that reads back exactly: repr on a small clock; on a real clock the
+    whole seconds and the fraction's exact decimal, which io.csvtable's
+    split_stamps (and odomgraph.online) read without float rounding."""
+    if not origin:
+        return repr(float(t))
+    from decimal import Decimal
+    whole = math.floor(t)
+    frac = t - whole                       # exact in float64
+    tail = format(Decimal(frac), "f")[1:] if frac else ""
+    return f"{origin + int(whole)}{tail}"
+
+
 #: Sensors in the order lines of equal stamps are merged.
 _ORDER = ("encoders", "wheel_speeds", "gyro", "gps", "ranges", "velocity")
 
@@ -64,8 +79,8 @@ _ORDER = ("encoders", "wheel_speeds", "gyro", "gps", "ranges", "velocity")
 def log_lines(log: Log) -> Iterator[str]:
     """Every measurement of ``log`` as stream lines, merged in time order
     (equal stamps: in _ORDER, then in file order). Values are written with
-    repr, stamps as the absolute float (t + log.t_origin), so reading them
-    back gives the log's numbers exactly."""
+    repr and stamps with exact_stamp, so reading them back gives the log's
+    numbers exactly."""
     ts, keys, texts = [], [], []
     for rank, name in enumerate(_ORDER):
         obj = getattr(log, name)
@@ -80,7 +95,7 @@ def log_lines(log: Log) -> Iterator[str]:
                 parts.append([log.robot.beacons[int(i)].id for i in v])
             else:
                 parts.append(list(map(repr, np.asarray(v, float).tolist())))
-        stamps = list(map(repr, (np.asarray(obj.t, float) + log.t_origin).tolist()))
+        stamps = [exact_stamp(t, log.t_origin) for t in np.asarray(obj.t, float).tolist()]
         texts += [",".join((name, st, *vals)) for st, *vals in zip(stamps, *parts)]
         ts.append(np.asarray(obj.t, float))
         keys.append(np.full(len(obj.t), rank))
