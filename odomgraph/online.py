@@ -137,7 +137,8 @@ class StreamInputError(OdomgraphError):
 class OnlineRow:
     """One estimate, as a states.csv row: ``t`` [s since ``t_origin``],
     ``mean`` (11,) and ``sigma`` (11,) in state.NAMES order (m, rad, m/s,
-    rad/s, scale factors unitless), ``pose_cov`` (3, 3) of x, y, theta."""
+    rad/s, scale factors unitless), ``pose_cov`` (3, 3) of x, y, theta
+    (None for isam2's causal rows, whose marginals are per variable)."""
     t: float
     mean: np.ndarray
     sigma: np.ndarray

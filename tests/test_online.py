@@ -29,6 +29,26 @@ def _stream(log, sch, lines=None, method="ekf", **kw):
     return live, rows
 
 
+def _resumed(log, sch, lines, share, path, method, **kw):
+    """Stream the first ``share`` of ``lines``, checkpoint to ``path``, load
+    it back (the first Online is gone) and stream the rest: (rows before the
+    checkpoint, all rows)."""
+    live = Online(log.robot, method, sch, **kw)
+    cut = int(share * len(lines))
+    first = []
+    for line in lines[:cut]:
+        s, t, v = parse_line(line)
+        first += live.push(s, t, *v)
+    live.save(path)
+    del live
+    back = Online.load(path)
+    rest = []
+    for line in lines[cut:]:
+        s, t, v = parse_line(line)
+        rest += back.push(s, t, *v)
+    return first, first + rest + back.close()
+
+
 def _assert_rows_equal(rows, est, tol=1e-9):
     t = np.array([r.t for r in rows])
     assert len(t) == len(est.t)
@@ -112,21 +132,7 @@ def test_resumed_from_a_checkpoint_equals_the_uninterrupted_run(tmp_path):
     sch = Schedule(calibrate_until=20.0)
     lines = list(log_lines(log))
     _, ref = _stream(log, sch)
-    live = Online(log.robot, "ekf", sch)
-    first = []
-    cut = int(0.6 * len(lines))            # well after the warm-up
-    for line in lines[:cut]:
-        s, t, v = parse_line(line)
-        first += live.push(s, float(t), *v)
-    live.save(tmp_path / "ck.pkl")
-    del live
-    back = Online.load(tmp_path / "ck.pkl")
-    rest = []
-    for line in lines[cut:]:
-        s, t, v = parse_line(line)
-        rest += back.push(s, float(t), *v)
-    rest += back.close()
-    rows = first + rest
+    first, rows = _resumed(log, sch, lines, 0.6, tmp_path / "ck.pkl", "ekf")   # cut well after the warm-up
     assert len(first) > 1000 and len(rows) == len(ref)
     assert all(np.array_equal(a.mean, b.mean) and np.array_equal(a.sigma, b.sigma) for a, b in zip(rows, ref))
 
@@ -320,20 +326,7 @@ def test_a_smoother_resumes_from_its_checkpoint(tmp_path):
     sch = Schedule(calibrate_until=20.0)
     lines = list(log_lines(log))
     _, ref = _stream(log, sch, method="isam2")
-    live = Online(log.robot, "isam2", sch, journal=True)
-    first = []
-    cut = int(0.7 * len(lines))
-    for line in lines[:cut]:
-        s, t, v = parse_line(line)
-        first += live.push(s, float(t), *v)
-    live.save(tmp_path / "ck")
-    back = Online.load(tmp_path / "ck")
-    rest = []
-    for line in lines[cut:]:
-        s, t, v = parse_line(line)
-        rest += back.push(s, float(t), *v)
-    rest += back.close()
-    rows = first + rest
+    first, rows = _resumed(log, sch, lines, 0.7, tmp_path / "ck", "isam2", journal=True)
     assert len(first) > 150 and len(rows) == len(ref)
     assert all(np.array_equal(a.mean, b.mean) and np.array_equal(a.sigma, b.sigma) for a, b in zip(rows, ref))
     without = Online(log.robot, "isam2", sch)
