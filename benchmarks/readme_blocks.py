@@ -1154,8 +1154,9 @@ def online_stream(results: Path) -> str:
         eqs = "rows differ in number from" if eq is None or any(r["max_abs_diff"] is None for r in rs) else \
             f"rows within {eq:.0e} of"
         what = "online.csv" if m == "isam2" else "states.csv"
+        lag = _rng([r["lag_p50_s"] for r in rs], "{:.2f}", " s")
         out.append(f"  - `{m}`: p99 {p99} per measurement, {rt} real time, memory of the last 10 % {mem} "
-                   f"the first's; {eqs} `estimate`'s {what};")
+                   f"the first's; each row out {lag} (median) after its time; {eqs} `estimate`'s {what};")
     out[-1] = out[-1].rstrip(";") + "."
     return "\n".join(out) + "\n\n  " + _source("online", d)
 

@@ -49,6 +49,7 @@ import heapq
 import math
 import os
 import pickle
+import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -481,8 +482,7 @@ class Online:
         if not self._warmup_given:
             self.warmup = self._default_warmup()
         for rows in self._raw.values():
-            while rows and rows[0][0] < t_r:
-                del rows[0]
+            del rows[:bisect.bisect_left(rows, (t_r,))]                 # (t_r,) sorts before (t_r, values)
         g = self._raw["gyro"]
         self._gyro_top = max(g, key=lambda r: abs(r[1][0])) if g else None    # the rail test's, from here on
         firsts = [rows[0][0] for rows in self._raw.values() if rows]
@@ -706,7 +706,7 @@ class _Smoother:
         self.grow = GrowingProblem([r.prob, r.graph.lin_prob, r.graph.lin_first], t_next, sch, self.step,
                                    opt.keyframe_hz)
         online.notes.append(prob.init.note)
-        self.wall0 = __import__("time").perf_counter()
+        self.wall0 = time.perf_counter()
         self._emitted = 0               # fixed-lag: keyframes whose row was written
         r.begin()
         self.next_k = 1                 # the next keyframe to advance to
