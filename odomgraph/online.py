@@ -604,9 +604,12 @@ class Online:
         rejected = dict(c.rejected) if self.smoother is None else dict(self.smoother.runner.graph.gated)
         warnings = []
         if self.ekf is not None:
-            warnings = list(self.ekf.init.warnings) + list(self.ekf.window_warnings)
+            warnings = list(self.ekf.init.warnings) + list(self.ekf.window_warnings) + self.ekf.heading_warnings()
         elif self.smoother is not None:
             warnings = list(self.smoother.runner.prob.init.warnings)
+            if self.smoother.watch is not None:
+                from odomgraph.estimators.heading import warning
+                warnings.append(warning(self.smoother.watch.t_known, self.smoother.runner.prob.meas.t_start))
         for k, v in self._nis.items():
             if v[1] >= 100 and v[0] / v[1] > NIS_WARN * v[2]:
                 warnings.append(f"{k}: mean NIS {v[0] / v[1]:.1f} over {v[1]} updates, expected {v[2]}: the "
@@ -711,6 +714,16 @@ class _Smoother:
         r.begin()
         self.next_k = 1                 # the next keyframe to advance to
         self.no_walk: list[int] = []    # intervals appended whose random walk waits for the next keyframe
+        # A start with no heading: the rows before the motion shows one are widened, as the replay's
+        # (batch.smoother_estimate); the watch reads the cleaned events in time order as they become final.
+        self.watch, self._watch_t = None, -math.inf
+        if prob.init.heading_unknown:
+            from odomgraph.estimators.heading import HeadingWatch
+            rb = online.robot
+            gps_first = prob.meas.gps is not None
+            self.lever = rb.gps_lever_arm if gps_first else rb.range_lever_arm
+            self.watch = HeadingWatch(rb.track_width, self.lever, float(np.median(prob.meas.gps[2])) if gps_first
+                                      else rb.range_sigma, fixes=gps_first)
 
     def wheel_row(self, i: int, t: float) -> None:
         """Wheel row i (of the whole stream) was released at t [s]."""
@@ -752,6 +765,7 @@ class _Smoother:
             self.grow.set_walk(j, kt[j + 2] if j + 2 < len(kt) else kt[j + 1])
         if final:
             r.last_k = r.prob.kf.n - 1
+        self._watch_heading(online, math.inf if final else b)
         out = []
         ready = r.prob.kf.n - 1 - len(self.no_walk)       # keyframes up to here have their interval
         while self.next_k <= ready:
@@ -762,11 +776,47 @@ class _Smoother:
             self.next_k += 1
         if not self.isam2:
             out += self._harvested(online, final)
+        if self.watch is not None:
+            until = self.watch.t_known - (0.0 if self.isam2 else r.options.lag)
+            out = [self._widen(row, until) if row.t < until else row for row in out]
         if final:
             r.trim()
+            if self.watch is not None:
+                r.heading_until = self.watch.t_known      # the final smoothing's, from the whole stream
             self.final = r.finish(self.wall0)
             online.final = self.final
         return out
+
+    def _watch_heading(self, online: Online, b: float) -> None:
+        """Feed the heading watch the cleaned events up to b [s] (only while
+        it waits: a start with no heading that has not moved yet)."""
+        from odomgraph.estimators.sensors import GPS, WHEEL, event_stream
+        w = self.watch
+        if w is None or w.known:
+            return
+        meas = from_log(online._log(self._watch_t - online.context if self._watch_t > -math.inf else -math.inf))
+        wh = meas.wheel
+        t_ev, code_ev, row_ev = event_stream(meas, wh.t[0])
+        dt = wh.dt if wh.dt is not None else np.append(np.diff(wh.t), np.median(np.diff(wh.t)) if len(wh.t) > 1
+                                                       else 0.0)
+        for t, code, i in zip(t_ev, code_ev, row_ev):
+            if t <= self._watch_t or t > b:
+                continue
+            if code == WHEEL:
+                w.wheel(t, wh.m[i, 0], wh.m[i, 1], dt[i])
+            elif code == GPS:
+                w.fix(t, meas.gps[1][i])
+            self._watch_t = float(t)
+            if w.known:
+                return
+
+    def _widen(self, row: OnlineRow, until: float) -> OnlineRow:
+        from dataclasses import replace as dc_replace
+        from odomgraph.estimators.heading import widen_rows
+        sig = row.sigma[None].copy()
+        pc = None if row.pose_cov is None else row.pose_cov[None].copy()
+        widen_rows(np.array([row.t]), sig, pc, until, self.lever)
+        return dc_replace(row, sigma=sig[0], pose_cov=None if pc is None else pc[0])
 
     def _online_row(self, k: int, online: Online) -> OnlineRow:
         r = self.runner

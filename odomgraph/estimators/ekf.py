@@ -31,6 +31,7 @@ from odomgraph.factors.motion import propagate
 from odomgraph import state as S
 from odomgraph.checks import bounded, check_fields
 from odomgraph.errors import EstimatorDivergedError
+from odomgraph.estimators.heading import HeadingWatch, circle_variance
 from odomgraph.estimators.initial import InitialState, initial_state
 from odomgraph.estimators.measurements import from_log, slip_intensity
 from odomgraph.observability import decondition
@@ -238,6 +239,7 @@ class EKF:
         self._R_slip = np.eye(2) * pn.pseudo_slip_sigma**2
         self._R_scale = np.eye(3) * pn.pseudo_scale_sigma**2
         self.holding_scale = False
+        self.consider_heading = False      # (heading.HeadingWatch: no heading known yet)
 
     # ------------------------------------------------------------ predict
     def predict(self, t: float) -> None:
@@ -280,6 +282,8 @@ class EKF:
         K = PHt @ Sinv
         if self.holding_scale:
             K[SCALE_IDX, :] = 0.0
+        if self.consider_heading:
+            K[S.THETA, :] = 0.0
         self.x += K @ y
         self.x[2] = wrap_angle(self.x[2])
         # Joseph form P = (I-KH) P (I-KH)' + K R K'. It keeps P symmetric
@@ -359,6 +363,18 @@ class EKF:
         self._pinned = bool(obs.unobservable)
         # The schedule's window, less where the fixes say the wheels slipped (slipcheck).
         self.slipping, self.window_warnings = in_window(self.init.slipping, m.t_start, self.t_switch)
+        # A start with no heading (standing still, no [initial]): fixes must not
+        # make one up (estimators.heading). Until the motion shows it, they
+        # are taken with the heading considered and the position floored.
+        self.heading_watch = None
+        self.heading_considered = 0          # fixes taken with the heading considered
+        self.heading_known_at = None
+        if self.init.heading_unknown:
+            gps_first = m.gps is not None
+            self.heading_watch = HeadingWatch(r.track_width, r.gps_lever_arm if gps_first else r.range_lever_arm,
+                                              float(np.median(m.gps[2])) if gps_first else r.range_sigma,
+                                              fixes=gps_first)
+            self._t_wheel = None
 
     def row(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """The output row at the current time: state (11,), variances (11,)
@@ -384,6 +400,16 @@ class EKF:
             self.holding_scale = sch.hold is Hold.consider
         x = self.x
         gates, hist, jump = self._gates, self._hist, self._jump
+        hw = self.heading_watch
+        if hw is not None:
+            if code == WHEEL:
+                hw.wheel(t, z[0], z[1], t - self._t_wheel if self._t_wheel is not None else 0.0)
+                self._t_wheel = t
+            elif code == GPS:
+                hw.fix(t, z)
+            if hw.known:
+                self.heading_known_at = hw.t_known
+                self.heading_watch = hw = None
         if code == WHEEL:
             if ((self.switch_sigma is None and self.t_switch is not None and not in_slip)
                     or not self.init.observability.slip_observable):
@@ -407,13 +433,13 @@ class EKF:
             R_k = np.eye(2) * sg * sg
             # a sensor held out after a jump gets no rescue from its recent innovations (the jump's)
             ref = None if key in jump else gate_reference(hist.setdefault(key, []))
-            nis_k = self.update(z, h, H, POSE_IDX, R_k, gates[GPS], ref)
+            nis_k = self._pose_update(z, h, H, R_k, gates[GPS], ref, self.robot.gps_lever_arm, hw)
         elif code == RANGE:
             h, H = ranging.beacon_range(x[0], x[1], x[2], aux[0], self.robot.range_lever_arm)   # eq. 12-16
             key = (RANGE, aux[1])
             R_k = self._R[RANGE]
             ref = None if key in jump else gate_reference(hist.setdefault(key, []))
-            nis_k = self.update(z, h, H[:, :3], POSE_IDX, R_k, gates[RANGE], ref)
+            nis_k = self._pose_update(z, h, H[:, :3], R_k, gates[RANGE], ref, self.robot.range_lever_arm, hw)
         else:
             h, H = velocity.body_velocity(x[3], x[4])                             # sec. VI-B
             key = (VEL, 0)
@@ -425,6 +451,33 @@ class EKF:
         if nis_k >= 0:          # (a rejected or held-out measurement says nothing of divergence)
             self._watch(t, code, nis_k)
         return nis_k
+
+    def _pose_update(self, z, h, H, R, gate, ref, lever, watch) -> float:
+        """A fix's or range's update (eq. 8-9, 12-16). While ``watch`` says
+        the heading is not known yet, the heading is considered, not
+        estimated (its gain row zero), and the position covariance is kept at
+        least the lever-arm circle's (heading.circle_variance): relinearised
+        at a heading that wanders with the noise, the fixes would otherwise
+        build up heading information that a robot standing still never gives."""
+        if watch is None:
+            return self.update(z, h, H, POSE_IDX, R, gate, ref)
+        # No heading column either: the fix then speaks of the position only,
+        # at the antenna less the lever arm turned by the heading held; the
+        # floor below keeps the circle that heading could be anywhere on.
+        H = H.copy()
+        H[:, 2] = 0.0
+        self.consider_heading = True
+        self.heading_considered += 1
+        try:
+            nis = self.update(z, h, H, POSE_IDX, R, gate, ref)
+        finally:
+            self.consider_heading = False
+        if nis >= 0:
+            floor = circle_variance(lever)
+            w, V = np.linalg.eigh(self.P[0:2, 0:2])
+            if w.min() < floor:
+                self.P[0:2, 0:2] += (V * np.maximum(floor - w, 0.0)) @ V.T    # adds PSD: stays a covariance
+        return nis
 
     def _gated(self, t: float, code: int, key: tuple, nis_k: float, R_k: np.ndarray) -> None:
         """After a gated sensor's update: hold a jump out, end a hold that
@@ -499,10 +552,19 @@ class EKF:
                             sch.hold, self.P[SCALE_IDX, SCALE_IDX].copy(), self.init)
         est.recoveries = list(self.recoveries)
         est.held_out = {k: np.asarray(v) for k, v in self.held_t.items()}
-        est.warnings += self.window_warnings
+        est.warnings += self.window_warnings + self.heading_warnings()
         for k, v in m.spikes.items():
             est.rejected[k] = est.rejected.get(k, 0) + v
         return est
+
+
+    def heading_warnings(self) -> list[str]:
+        """The warning of a start whose heading the motion had not shown yet, if fixes were taken so."""
+        if not self.heading_considered:
+            return []
+        from odomgraph.estimators.heading import warning
+        return [warning(self.heading_known_at if self.heading_known_at is not None else float("inf"),
+                        self.meas.t_start)]
 
 
 def event_values(meas, code: int, i: int) -> tuple:

@@ -83,6 +83,10 @@ def run_ekf_many(logs: list[Log], schedule: Schedule = Schedule(), options: EKFO
     n = len(logs)
     meas = [from_log(log) for log in logs]
     inits = [initial_state(log.robot, m, dict(options.pin)) for log, m in zip(logs, meas)]
+    if any(i.heading_unknown for i in inits):
+        # (the EKF's heading watch, estimators.heading, is not vectorised)
+        raise ValueError("run_ekf_many: a run starts with no heading (standing still, no [initial] pose); "
+                         "filter it with ekf.EKF")
     if len({i.t for i in inits}) != 1:
         raise ValueError("run_ekf_many: the runs start at different times (give robot.toml an [initial] pose)")
     streams = [event_stream(m, inits[0].t) for m in meas]

@@ -346,6 +346,7 @@ class _Runner:
             raise OdomgraphError(f"{self.method}: range biases and a robust velocity random walk are "
                                  "batch-smoother options")
         self.log, self.schedule, self.options = log, schedule, options
+        self.heading_until: float | None = None   # set by a stream (online.py): when its motion showed the heading
         # _watch: per sensor [slow running mean, count, dof, the last few values]
         self._ema = {"GPS fixes": [2.0, 0, 2, []], "ranges": [1.0, 0, 1, []]}
         # causal: the online row of interval k is produced at t_{k+1} from data up to t_{k+1}.
@@ -439,7 +440,7 @@ class _Runner:
             extra["held_out"] = {"gps": self.prob.kf.gps_t[gi]}
         return smoother_estimate(self.prob, self.schedule, self.pose, self.W, Sig, self.method, wall0, notes,
                                  held=held, update_times=self.update_times[1:], recoveries=list(self.recoveries),
-                                 **extra)
+                                 heading_until=self.heading_until, **extra)
 
     def _watch(self, j: int) -> None:
         """Divergence watch on interval j's GPS fixes and ranges, at the estimate just
@@ -981,7 +982,8 @@ class FixedLagRunner(_Runner):
         # of one keyframe is not available, so pose sigma at the row time
         # ignores it (it is second order for the pose).
         return self._estimate(self.Sig, wall0, [f"fixed-lag: {self.prob.kf.n} keyframes at "
-                                                f"{self.options.keyframe_hz:g} Hz, lag {self.options.lag:g} s"])
+                                                f"{self.options.keyframe_hz:g} Hz, lag {self.options.lag:g} s"],
+                              causal_lag=self.options.lag)
 
 
 def run_isam2(log: Log, schedule: Schedule = Schedule(), options: IncrementalOptions = IncrementalOptions(),

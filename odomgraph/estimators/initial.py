@@ -45,6 +45,10 @@ class InitialState:
     slipping: tuple[tuple[float, float], ...] = ()
     """Stretches [s] where the fixes contradict the wheels (slipcheck): no
     schedule may take them as slip-free."""
+    heading_unknown: bool = False
+    """The start's heading is unknown (the first fixes show no motion; sigma
+    pi): until the motion shows it (estimators.heading), no estimator may
+    claim one."""
 
 
 def _wheel_rates(robot: RobotConfig, meas: Measurements):
@@ -107,7 +111,7 @@ def initial_state(robot: RobotConfig, meas: Measurements, pin: dict[str, str] | 
     P[np.ix_(S.SCALE, S.SCALE)] = prior_scale_cov(obs, pn.initial_scale_sigma)
     tw, vw, ww = _wheel_rates(robot, meas)
 
-    def finish(t0, pose, pose_cov, note, warnings=()):
+    def finish(t0, pose, pose_cov, note, warnings=(), heading_unknown=False):
         if np.sum(tw >= t0) < 2:
             raise NotEnoughDataError(f"fewer than two wheel measurements after the estimator's start at "
                                      f"t={t0:.6g} s ({note}); the wheel odometry ends at t={tw[-1]:.6g} s")
@@ -121,7 +125,7 @@ def initial_state(robot: RobotConfig, meas: Measurements, pin: dict[str, str] | 
         P[S.OMEGA, S.OMEGA] = (0.2 + 0.1 * abs(ww[k])) ** 2
         P[np.ix_(S.POSE, S.POSE)] = pose_cov
         return InitialState(float(t0), x, P, note, obs, tuple(warnings) + extra,
-                            tuple(slipping_stretches(meas, robot, float(t0), float(tw[-1]))))
+                            tuple(slipping_stretches(meas, robot, float(t0), float(tw[-1]))), heading_unknown)
 
     if robot.initial is not None:
         i = robot.initial
@@ -144,7 +148,8 @@ def initial_state(robot: RobotConfig, meas: Measurements, pin: dict[str, str] | 
         return finish(t0, np.zeros(3), np.diag([1e-6, 1e-6, 1e-6]), msg, (msg,))
     fit = consensus_pose(tw, meas.wheel.m[:, 0], meas.wheel.m[:, 1], _wheel_dt(meas), robot.track_width, *fixes,
                          pn.initial_scale_sigma)
-    return finish(tw[0], fit.pose, fit.cov, f"initial pose from {source}: {fit.note}", fit.warnings)
+    return finish(tw[0], fit.pose, fit.cov, f"initial pose from {source}: {fit.note}", fit.warnings,
+                  heading_unknown=not fit.moved)
 
 
 # ------------------------------------------------------------- consensus start
@@ -167,6 +172,8 @@ class ConsensusFit:
     outliers: int
     note: str
     warnings: tuple[str, ...] = ()
+    moved: bool = True
+    """False: the fixes showed no motion, so no heading (sigma pi)."""
 
 
 def _wheel_dt(meas: Measurements) -> np.ndarray:
@@ -275,12 +282,30 @@ def consensus_pose(tw, ml, mr, dtw, track, ft, fp, fs, lever, scale_sigma: float
     ft, fp, fs = np.asarray(ft, float), np.asarray(fp, float), np.asarray(fs, float)
     d = _antenna_at(dr, t_dr, ft, lever)
     s_f = np.interp(ft, t_dr, travel)
-    # The window: from the first fix until enough travel (and fixes), at most CONSENSUS_WINDOW.
     need = max(CONSENSUS_TRAVEL, 20.0 * float(np.median(fs)))
-    within = ft <= ft[0] + CONSENSUS_WINDOW
-    enough = np.flatnonzero(within & (s_f - s_f[0] >= need) & (np.arange(len(ft)) >= 5))
-    m = int(enough[0]) + 1 if enough.size else int(within.sum())
-    m = max(m, min(len(ft), 8))
+
+    def window(ft, fs, d, s_f):
+        """The window: from the first fix until enough travel (and fixes), at
+        most CONSENSUS_WINDOW; its size and the antenna's spread over it."""
+        within = ft <= ft[0] + CONSENSUS_WINDOW
+        enough = np.flatnonzero(within & (s_f - s_f[0] >= need) & (np.arange(len(ft)) >= 5))
+        m = int(enough[0]) + 1 if enough.size else int(within.sum())
+        m = max(m, min(len(ft), 8))
+        return m, (float(np.max(np.hypot(*(d[:m] - d[:m].mean(0)).T))) if m > 1 else 0.0)
+
+    m, spread = window(ft, fs, d, s_f)
+    thr_move = max(3.0 * float(np.median(fs)), 0.05)     # the "hardly moved" test below
+    moved = np.flatnonzero(np.hypot(*(d - d[0]).T) >= thr_move)
+    if spread < thr_move and moved.size and moved[0] >= m:
+        # A robot that stands still first shows its heading only when it
+        # moves: the window then starts with the last few fixes before the
+        # wheels' antenna first moves, and the pose is carried back over the
+        # wait (the wheels say nothing happened in it). Without this a long
+        # wait started every estimator at heading 0 +- pi, and isam2 could not
+        # recover once the robot drove off 2.5 rad from it.
+        i0 = max(int(moved[0]) - 5, 0)
+        ft, fp, fs, d, s_f = ft[i0:], fp[i0:], fs[i0:], d[i0:], s_f[i0:]
+        m, spread = window(ft, fs, d, s_f)
     W_t, W_p, W_s, W_d, W_sf = ft[:m], fp[:m], fs[:m], d[:m], s_f[:m]
     ds = np.abs(W_sf - W_sf[0])
     # What nominal parameters may have drifted [m]: along track with the
@@ -288,7 +313,6 @@ def consensus_pose(tw, ml, mr, dtw, track, ft, fp, fs, lever, scale_sigma: float
     # curvature sqrt(2) sigma / track).
     drift = 2.0 * scale_sigma * ds + 0.5 * (2.0 * np.sqrt(2.0) * scale_sigma / track) * ds**2
     thr = 3.4 * W_s + drift
-    spread = float(np.max(np.hypot(*(W_d - W_d.mean(0)).T))) if m > 1 else 0.0
     t_first_gap = float(ft[0] - tw[0])
     back = 2.0 * scale_sigma * float(np.interp(ft[0], t_dr, travel))
     back_th = scale_sigma * float(np.interp(ft[0], t_dr, turned)) + \
@@ -300,11 +324,11 @@ def consensus_pose(tw, ml, mr, dtw, track, ft, fp, fs, lever, scale_sigma: float
         pose = np.array([med[0], med[1], 0.0])
         return ConsensusFit(pose, np.diag([s_p**2, s_p**2, np.pi**2]), m, 0,
                             f"position from the median of {m} fixes; heading not observable from the first motion "
-                            "(sigma = pi)")
+                            "(sigma = pi)", moved=False)
     phi, cx, cy, inl, best = rigid_ransac(W_d, W_p, thr)
     if best < 0:
         return ConsensusFit(np.array([*np.median(W_p, 0), 0.0]), np.diag([1.0, 1.0, np.pi**2]), m, 0,
-                            "position from the median of the first fixes; no pair of them fixes a heading")
+                            "position from the median of the first fixes; no pair of them fixes a heading", moved=False)
     keep = inl[best]
 
     # Least squares on the inliers: (cx, cy, phi) and the scale errors

@@ -1,0 +1,170 @@
+"""When the heading is not known yet: a robot that has neither driven nor turned.
+
+Without an [initial] pose the start heading comes from the first motion
+(initial.consensus_pose). A robot that stands still gives none: GPS fixes the
+antenna, and with a lever arm l the centre lies anywhere on the circle of
+radius |l| around it. No estimator may then report a heading, or a centre
+tighter than that circle, however its linearisation reads the data:
+
+- the EKF, relinearising each fix at a heading that wanders with the fix
+  noise, gathered heading information that is not there (sigma 0.1 rad with
+  0.4 rad of error after 150 s standing still: a 0.55 coverage);
+- Gauss-Newton took the nonholonomic link between the heading and the fixes'
+  slow wander as information (batch: heading 1.5 rad off at sigma 0.43).
+
+``HeadingWatch`` says, causally, when the motion has shown the heading: the
+wheels' dead-reckoned antenna has moved, and so have the fixes (a trailing
+median, so that noise and outliers do not count as motion). Until then the
+EKF takes fixes with the heading considered, not estimated (Schmidt), and its
+position covariance floored at the lever-arm circle's; the smoothers' rows
+before that time (after it, for batch, only when it never comes) are widened
+by ``widen_rows``.
+"""
+from __future__ import annotations
+
+import math
+from collections import deque
+
+import numpy as np
+
+#: Trailing window of fixes whose median tells motion from noise: this many at
+#: least, and at least FIX_WINDOW_S seconds of them.
+FIX_MEDIAN_N = 5
+FIX_WINDOW_S = 2.0
+
+
+def motion_threshold(fix_sigma: float) -> float:
+    """Displacement that shows a heading [m]: the consensus fit's ``the antenna
+    hardly moved`` test (initial.consensus_pose), 3 fix sigmas or 5 cm."""
+    return max(3.0 * float(fix_sigma), 0.05)
+
+
+def circle_variance(lever) -> float:
+    """Per-axis variance [m^2] the unknown heading leaves the centre: the
+    centre is antenna - R(theta) l with theta anywhere, a point of the circle
+    of radius |l| (per-axis variance |l|^2 / 2; 3 sigma = 2.1 |l|, more than
+    the circle's diameter, so any heading estimate is covered)."""
+    return 0.5 * float(np.hypot(*lever)) ** 2
+
+
+class HeadingWatch:
+    """Causal test: has the motion shown the heading yet?
+
+    Feed it, in time order, the wheel measurements (``wheel``: nominal left
+    and right speeds [m/s] over dt [s]) and the absolute fixes (``fix``:
+    antenna x, y [m] with sigma [m]). ``known`` turns True, at time
+    ``t_known`` [s], once both the wheels' dead-reckoned antenna (lever arm
+    ``lever`` (2,) in the body frame [m], track ``track`` [m]) and the
+    trailing median of the fixes have moved ``motion_threshold`` from where
+    they started. Without fixes (``fixes=False``: ranges, whose single
+    measurements fix no point) the wheels alone decide.
+    """
+
+    def __init__(self, track: float, lever, fix_sigma: float, fixes: bool = True):
+        self.track = float(track)
+        self.lever = np.asarray(lever, float)
+        self.thr = motion_threshold(fix_sigma)
+        self.pose = np.zeros(3)
+        self._a0 = self._antenna()
+        self.wheels_moved = False
+        self.fixes_moved = not fixes
+        self._fixes: deque = deque()
+        self._fix0: np.ndarray | None = None
+        self.t_known = math.inf
+
+    @property
+    def known(self) -> bool:
+        return self.t_known < math.inf
+
+    def _antenna(self) -> np.ndarray:
+        c, s = math.cos(self.pose[2]), math.sin(self.pose[2])
+        lx, ly = self.lever
+        return np.array([self.pose[0] + c * lx - s * ly, self.pose[1] + s * lx + c * ly])
+
+    def _done(self, t: float) -> None:
+        if self.wheels_moved and self.fixes_moved and not self.known:
+            self.t_known = float(t)
+
+    def wheel(self, t: float, v_left: float, v_right: float, dt: float) -> None:
+        if self.known or self.wheels_moved:
+            return
+        v, w = 0.5 * (v_left + v_right), (v_right - v_left) / self.track
+        th = self.pose[2] + 0.5 * w * dt
+        self.pose += (v * dt * math.cos(th), v * dt * math.sin(th), w * dt)
+        if float(np.hypot(*(self._antenna() - self._a0))) >= self.thr:
+            self.wheels_moved = True
+            self._done(t)
+
+    def fix(self, t: float, xy, sigma: float | None = None) -> None:
+        if self.known or self.fixes_moved:
+            return
+        q = self._fixes
+        q.append((float(t), float(xy[0]), float(xy[1])))
+        while len(q) > FIX_MEDIAN_N and q[-1][0] - q[1][0] >= FIX_WINDOW_S:
+            q.popleft()
+        if len(q) < FIX_MEDIAN_N:
+            return
+        med = np.median(np.array([(x, y) for _, x, y in q]), 0)
+        if self._fix0 is None:
+            self._fix0 = med
+        elif float(np.hypot(*(med - self._fix0))) >= self.thr:
+            self.fixes_moved = True
+            self._done(t)
+
+
+def known_from(meas, robot) -> float:
+    """``HeadingWatch.t_known`` over a whole log's measurements
+    (estimators.measurements.Measurements): the time [s] the motion first
+    shows the heading, math.inf if it never does. Causal: the same time a
+    watch fed live would give."""
+    from odomgraph.estimators.sensors import GPS, WHEEL, event_stream
+    if meas.gps is not None:
+        lever, sig, fixes = robot.gps_lever_arm, float(np.median(meas.gps[2])), True
+    else:
+        lever, sig, fixes = robot.range_lever_arm, robot.range_sigma, False
+    hw = HeadingWatch(robot.track_width, lever, sig, fixes)
+    w = meas.wheel
+    dt = w.dt if w.dt is not None else np.append(np.diff(w.t), np.median(np.diff(w.t)) if len(w.t) > 1 else 0.0)
+    t_ev, code_ev, row_ev = event_stream(meas, w.t[0])
+    for t, code, i in zip(t_ev, code_ev, row_ev):
+        if code == WHEEL:
+            hw.wheel(t, w.m[i, 0], w.m[i, 1], dt[i])
+        elif code == GPS:
+            hw.fix(t, meas.gps[1][i])
+        if hw.known:
+            break
+    return hw.t_known
+
+
+def widen_rows(t: np.ndarray, sigma: np.ndarray, pose_cov: np.ndarray | None, until: float, lever) -> int:
+    """Rows before ``until`` [s] (t (N,), sigma (N, 11), pose_cov (N, 3, 3) or
+    None, in place): heading sigma at least pi, and x, y at least the
+    lever-arm circle's (circle_variance) on top of what they had. Returns the
+    number of rows widened."""
+    sel = np.asarray(t) < until
+    n = int(sel.sum())
+    if not n:
+        return 0
+    add = circle_variance(lever)
+    sigma[sel, 0] = np.sqrt(sigma[sel, 0] ** 2 + add)
+    sigma[sel, 1] = np.sqrt(sigma[sel, 1] ** 2 + add)
+    sigma[sel, 2] = np.maximum(sigma[sel, 2], math.pi)
+    if pose_cov is not None:
+        pc = pose_cov[sel]
+        pc[:, 0, 0] += add
+        pc[:, 1, 1] += add
+        th = np.sqrt(np.maximum(pc[:, 2, 2], 1e-300))
+        f = np.maximum(math.pi / th, 1.0)          # scale theta's row and column: stays positive semi-definite
+        pc[:, 2, :] *= f[:, None]
+        pc[:, :, 2] *= f[:, None]
+        pose_cov[sel] = pc
+    return n
+
+
+def warning(until: float, t0: float) -> str:
+    """The one-line warning of a stretch with the heading unknown."""
+    if until == math.inf:
+        return ("heading not observable: the robot neither drove nor turned (fixes and wheels show no motion); "
+                "heading sigma is pi, and x, y sigma include the GPS lever-arm circle")
+    return (f"heading not observable until t={until - t0:.1f} s, when the robot first moved: before it, heading "
+            "sigma is pi and x, y sigma include the lever-arm circle")
