@@ -534,6 +534,10 @@ FIRST_GATE = 10.0
 #: The fast watch trips when the recent post-fit residuals average this many
 #: times their expected whitened square (about 3.9 sigma per axis).
 FAST_WATCH = 15.0
+#: A prior heading sigma [rad] above which isam2 settles its start (ISAM2Runner._settle_start) ...
+SETTLE_HEADING = 0.2
+#: ... until a re-solve leaves the heading this sure [rad].
+SETTLE_HEADING_DONE = 0.05
 
 #: ISAM2 boundary tangent order (X 3, W_KEY 6, S_KEY 2) -> keyframe block order (graph.py).
 _PERM = np.array([0, 1, 2] + [3 + i for i in W_IDX] + [3 + i for i in S_IDX])
@@ -578,6 +582,8 @@ class ISAM2Runner(_Runner):
         self.segments: list[dict] = []
         self.online = np.zeros((self.prob.kf.n, St.N))
         self.online_sigma = np.zeros((self.prob.kf.n, St.N))
+        self._settled = float(np.sqrt(self.prob.prior_cov[2, 2])) <= SETTLE_HEADING
+        self._settle_next, self.settles = 2.0, 0
 
     def step(self, k, factors, values):
         isam, kf = self.isam, self.prob.kf
@@ -607,9 +613,30 @@ class ISAM2Runner(_Runner):
             self.W[i, W_IDX] = isam.calculateEstimateVector(W_KEY(i))
             self.W[i, S_IDX] = isam.calculateEstimateVector(S_KEY(i))
         self._online_row(k)
+        self._settle_start(k)
         seg = self.options.segment
         if seg > 0 and kf.t[k] - kf.t[self.seg_start] >= seg and k < self.last_k:
             self._hand_over(k)
+
+    def _settle_start(self, k: int) -> None:
+        """A start whose heading the prior barely knows (sigma above
+        SETTLE_HEADING: a consensus fit on few or weak fixes, or none): the
+        linear factors of every interval so far were linearised at headings
+        that were guesses, and a linear factor keeps its linearisation. Until
+        the heading is known, the first segment is re-solved from its prior
+        (Gauss-Newton over keyframes 0..k, as a recovery) at doubling ages
+        (2, 4, 8, ... s), and the ISAM2 restarted there: O(n) work in all."""
+        if self.segments or self.seg_start != 0 or self._settled:
+            return
+        kf = self.prob.kf
+        age = kf.t[k] - kf.t[0]
+        if age < self._settle_next:
+            return
+        self._settle_next = 2.0 * max(age, 1.0)
+        self.recover(k, 0)
+        if self.online_sigma[k, 2] < SETTLE_HEADING_DONE:
+            self._settled = True
+        self.settles += 1
 
     def _online_row(self, k):
         """The causal estimate at t_k, of the state at the midpoint of the
@@ -858,8 +885,12 @@ class ISAM2Runner(_Runner):
         Sig = marginal_blocks(self.prob, self.pose, self.W)
         kf = self.prob.kf
         online = Estimate("isam2-online", kf.t[:-1] + 0.5 * kf.dt, self.online[1:], self.online_sigma[1:])
-        return self._estimate(Sig, wall0, [f"isam2: {kf.n} keyframes at {self.options.keyframe_hz:g} Hz, one "
-                                           f"ISAM2 update each, {len(self.segments) + 1} segment(s)"], online=online)
+        notes = [f"isam2: {kf.n} keyframes at {self.options.keyframe_hz:g} Hz, one ISAM2 update each, "
+                 f"{len(self.segments) + 1} segment(s)"]
+        if self.settles:
+            notes.append(f"isam2: the start's heading was uncertain; the first segment was re-solved from its prior "
+                         f"{self.settles} time(s) as the heading firmed up")
+        return self._estimate(Sig, wall0, notes, online=online)
 
 
 class FixedLagRunner(_Runner):
