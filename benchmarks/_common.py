@@ -86,6 +86,22 @@ def _module_file(root: Path, name: str) -> Path | None:
     return None
 
 
+def _walk_with_code_strings(tree):
+    """ast.walk, and into string constants that parse as Python with an
+    import in them: the code a benchmark hands to ``python -c`` in a child
+    process (benchmarks.online, benchmarks.log_io), whose imports would
+    otherwise be invisible and its results never stale."""
+    import ast
+    for node in ast.walk(tree):
+        yield node
+        if isinstance(node, ast.Constant) and isinstance(node.value, str) and "import " in node.value:
+            try:
+                inner = ast.parse(node.value)
+            except SyntaxError:
+                continue
+            yield from _walk_with_code_strings(inner)
+
+
 def static_sources(*paths: Path) -> dict[str, str]:
     """{path: code_hash} of every project file that ``paths`` import, read
     from their syntax trees (every import statement, also those inside
@@ -100,7 +116,7 @@ def static_sources(*paths: Path) -> dict[str, str]:
         if f in seen:
             continue
         seen.add(f)
-        for node in ast.walk(ast.parse(f.read_text(encoding="utf-8"))):
+        for node in _walk_with_code_strings(ast.parse(f.read_text(encoding="utf-8"))):
             names = []
             if isinstance(node, ast.Import):
                 names = [a.name for a in node.names]
