@@ -110,6 +110,11 @@ def test_a_benchmark_records_the_code_its_pool_workers_ran(tmp_path, monkeypatch
     assert not any(k.startswith(("benchmarks", "tests")) for k in rec)
     fuzz = static_sources(root / "tests" / "test_fuzz.py")
     assert "odomgraph/cli.py" in fuzz and "odomgraph/io/csvtable.py" in fuzz
+    # benchmarks.online runs its streams as `python -c <code string>`: the
+    # string's imports count (before, online.json never went stale)
+    online = static_sources(root / "benchmarks" / "online.py")
+    for f in ("odomgraph/online.py", "odomgraph/io/stream.py", "odomgraph/estimators/incremental.py"):
+        assert online[f] == code_hash(root / f)
     res = tmp_path / "benchmarks" / "results"
     res.mkdir(parents=True)
     (res / "x.json").write_text(json.dumps({"sources": {}, "sources_kind": "code"}))
