@@ -227,6 +227,7 @@ class Online:
         self._gyro_top: tuple | None = None  # (t, omega) of the largest |rate| so far (the rail test's)
         self._nis = {}                      # sensor -> [sum of accepted NIS, count, dimension]
         self.alerts: list[str] = []         # warnings said as they arise (odomgraph stream prints them)
+        self._settle_said = 0
         self._fail_t = None                 # time of the event being filtered (a divergence's)
         # A smoother's GTSAM state cannot be pickled: its checkpoint is every
         # measurement pushed so far, replayed on load (deterministic, so equal).
@@ -508,6 +509,10 @@ class Online:
             b = self._final_before()
         if self.smoother is not None:
             out = self.smoother.feed(self, b, final)
+            said = getattr(self.smoother.runner, "settle_warnings", [])   # isam2's start heading (incremental.py)
+            for msg in said[self._settle_said:]:
+                self.alerts.append(msg)
+            self._settle_said = len(said)
         elif not final and b - self.t_done < self.chunk:
             return []
         else:
@@ -606,7 +611,8 @@ class Online:
         if self.ekf is not None:
             warnings = list(self.ekf.init.warnings) + list(self.ekf.window_warnings) + self.ekf.heading_warnings()
         elif self.smoother is not None:
-            warnings = list(self.smoother.runner.prob.init.warnings)
+            warnings = list(self.smoother.runner.prob.init.warnings) + list(
+                getattr(self.smoother.runner, "settle_warnings", []))
             if self.smoother.watch is not None:
                 from odomgraph.estimators.heading import warning
                 warnings.append(warning(self.smoother.watch.t_known, self.smoother.runner.prob.meas.t_start))

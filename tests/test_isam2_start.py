@@ -39,3 +39,42 @@ def test_isam2_online_heading_is_honest_from_an_uncertain_start(case):
     assert any("re-solved from its prior" in n for n in est.notes)
     e = est.mean[-1, SCALE] / np.array(sc.scales) - 1.0
     assert np.all(np.abs(e / est.sigma[-1, SCALE]) < 4.0), f"scale factors' error / sigma {e / est.sigma[-1, SCALE]}"
+
+
+def _run(make, sigma, hz, seed, segment, duration=60.0):
+    base = make(duration).with_(slips=())
+    sc = base.with_(robot=base.robot.with_(gps_sigma=sigma), rates=replace(base.rates, gps=hz))
+    log = inject(sc, Faults(), seed)
+    return sc, log, estimate(log, "isam2", Schedule(20.0), fit_noise=False, segment=segment)
+
+
+def test_the_first_segment_stays_open_until_its_heading_settles_and_says_when_it_could_not():
+    """A --segment shorter than the time the fixes take to pin the heading:
+    the first segment is kept open (it alone can be re-solved) up to
+    FIRST_SEGMENT_CAP segments, re-solved once more as it closes, and a
+    warning says the heading was still uncertain then. Before, the settle
+    stopped silently at the first hand-over (t = 6 s here)."""
+    from odomgraph.estimators.incremental import FIRST_SEGMENT_CAP
+    sc, log, est = _run(paper, 2.0, 1.0, 3, segment=6.0)
+    said = [w for w in est.warnings if "still uncertain" in w]
+    assert len(said) == 1, est.warnings
+    close = float(said[0].split("closed at t=")[1].split(" s")[0])
+    assert FIRST_SEGMENT_CAP * 6.0 <= close < FIRST_SEGMENT_CAP * 6.0 + 0.5
+    sig_deg = float(said[0].split("(sigma ")[1].split(" deg")[0])
+    assert sig_deg > 2.9                                   # above SETTLE_HEADING_DONE, as said
+    on = est.online
+    dth = (on.mean[:, 2] - log.truth.at("theta", on.t) + np.pi) % (2 * np.pi) - np.pi
+    assert np.mean(np.abs(dth) / on.sigma[:, 2] < 3.0) >= 0.97
+    e = est.mean[-1, SCALE] / np.array(sc.scales) - 1.0
+    assert np.all(np.abs(e / est.sigma[-1, SCALE]) < 3.0), e / est.sigma[-1, SCALE]
+
+
+def test_a_heading_that_settles_inside_a_short_first_segment_gives_no_warning():
+    """Precise fixes (0.5 m at 5 Hz) pin the heading within the first 6 s
+    segment: no warning, the segments close on time (60 s / 6 s)."""
+    sc, log, est = _run(paper, 0.5, 5.0, 3, segment=6.0)
+    assert not [w for w in est.warnings if "still uncertain" in w]
+    n_seg = int(next(n for n in est.notes if "segment(s)" in n).split(", ")[-1].split(" ")[0])
+    assert n_seg == 10
+    e = est.mean[-1, SCALE] / np.array(sc.scales) - 1.0
+    assert np.all(np.abs(e / est.sigma[-1, SCALE]) < 3.0)

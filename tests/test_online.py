@@ -438,3 +438,19 @@ def test_stream_refuses_batch_in_one_line(streamed):
     r = _cli("stream", "--replay", d / "log", "--method", "batch")
     assert r.returncode == 1
     assert r.stderr.startswith("odomgraph: error: batch smooths a whole log") and "Traceback" not in r.stderr
+
+
+def test_a_stream_says_when_isam2_closes_its_first_segment_unsettled():
+    """The replay's warning (tests/test_isam2_start.py) is said live, once, and
+    is in the summary; the streamed rows still equal the replay's."""
+    from dataclasses import replace
+    base = paper(40.0).with_(slips=())
+    sc = base.with_(robot=base.robot.with_(gps_sigma=2.0), rates=replace(base.rates, gps=1.0))
+    log = inject(sc, Faults(), 3)
+    sch = Schedule(calibrate_until=20.0)
+    est = estimate(log, "isam2", sch, fit_noise=False, segment=6.0)
+    live, rows = _stream(log, sch, method="isam2", segment=6.0)
+    said = [a for a in live.alerts if "still uncertain" in a]
+    assert said == [w for w in est.warnings if "still uncertain" in w] and len(said) == 1
+    assert said[0] in live.summary()["warnings"]
+    _assert_rows_equal(rows, est.online)

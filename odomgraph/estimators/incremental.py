@@ -538,6 +538,9 @@ FAST_WATCH = 15.0
 SETTLE_HEADING = 0.2
 #: ... until a re-solve leaves the heading this sure [rad].
 SETTLE_HEADING_DONE = 0.05
+#: The first segment is kept open up to this many --segment lengths while its
+#: heading is unsettled (memory grows by as much, once).
+FIRST_SEGMENT_CAP = 4.0
 
 #: ISAM2 boundary tangent order (X 3, W_KEY 6, S_KEY 2) -> keyframe block order (graph.py).
 _PERM = np.array([0, 1, 2] + [3 + i for i in W_IDX] + [3 + i for i in S_IDX])
@@ -583,7 +586,8 @@ class ISAM2Runner(_Runner):
         self.online = np.zeros((self.prob.kf.n, St.N))
         self.online_sigma = np.zeros((self.prob.kf.n, St.N))
         self._settled = float(np.sqrt(self.prob.prior_cov[2, 2])) <= SETTLE_HEADING
-        self._settle_next, self.settles = 2.0, 0
+        self._settle_next, self.settles, self._settled_at = 2.0, 0, -1
+        self.settle_warnings: list[str] = []
 
     def step(self, k, factors, values):
         isam, kf = self.isam, self.prob.kf
@@ -616,27 +620,50 @@ class ISAM2Runner(_Runner):
         self._settle_start(k)
         seg = self.options.segment
         if seg > 0 and kf.t[k] - kf.t[self.seg_start] >= seg and k < self.last_k:
-            self._hand_over(k)
+            # The first segment stays open while its start heading is unsettled
+            # (up to FIRST_SEGMENT_CAP segments): its hand-over marginal is what
+            # every later segment starts from, and only an open segment can be
+            # re-solved.
+            if self._settled or self.segments or kf.t[k] - kf.t[0] >= FIRST_SEGMENT_CAP * seg:
+                self._settle_start(k, closing=True)
+                self._hand_over(k)
 
-    def _settle_start(self, k: int) -> None:
+    def _settle_start(self, k: int, closing: bool = False) -> None:
         """A start whose heading the prior barely knows (sigma above
         SETTLE_HEADING: a consensus fit on few or weak fixes, or none): the
         linear factors of every interval so far were linearised at headings
         that were guesses, and a linear factor keeps its linearisation. Until
         the heading is known, the first segment is re-solved from its prior
         (Gauss-Newton over keyframes 0..k, as a recovery) at doubling ages
-        (2, 4, 8, ... s), and the ISAM2 restarted there: O(n) work in all."""
+        (2, 4, 8, ... s), and the ISAM2 restarted there: O(n) work in all.
+
+        ``closing``: the first segment is about to be handed over at keyframe
+        k (kept open until settled, at most FIRST_SEGMENT_CAP segment
+        lengths); it is re-solved once more whatever its age, because its
+        hand-over marginal is what every later segment starts from. If the
+        heading is still not known to SETTLE_HEADING_DONE then, that is said
+        (``settle_warnings``): no later settle can reach those linear factors."""
         if self.segments or self.seg_start != 0 or self._settled:
             return
         kf = self.prob.kf
         age = kf.t[k] - kf.t[0]
-        if age < self._settle_next:
+        if age < self._settle_next and not closing:
             return
-        self._settle_next = 2.0 * max(age, 1.0)
-        self.recover(k, 0)
+        if not (closing and self._settled_at == k):       # not re-solved at this keyframe already
+            self._settle_next = 2.0 * max(age, 1.0)
+            self.recover(k, 0)
+            self._settled_at = k
+            self.settles += 1
         if self.online_sigma[k, 2] < SETTLE_HEADING_DONE:
             self._settled = True
-        self.settles += 1
+        elif closing:
+            self._settled = True                          # nothing left to settle
+            self.settle_warnings.append(
+                f"isam2: the start's heading was still uncertain (sigma {np.degrees(self.online_sigma[k, 2]):.1f} "
+                f"deg, settled at {np.degrees(SETTLE_HEADING_DONE):.1f}) when the first segment closed at "
+                f"t={kf.t[k]:.1f} s ({FIRST_SEGMENT_CAP:g} x --segment): the causal estimates (online.csv) and the segments after it rest on "
+                "linearisations at a heading the fixes had not pinned; the smoothed states were re-solved "
+                "(a longer --segment, or an [initial] pose in robot.toml, avoids this)")
 
     def _online_row(self, k):
         """The causal estimate at t_k, of the state at the midpoint of the
@@ -890,7 +917,7 @@ class ISAM2Runner(_Runner):
         if self.settles:
             notes.append(f"isam2: the start's heading was uncertain; the first segment was re-solved from its prior "
                          f"{self.settles} time(s) as the heading firmed up")
-        return self._estimate(Sig, wall0, notes, online=online)
+        return self._estimate(Sig, wall0, notes, online=online, warnings=self.settle_warnings)
 
 
 class FixedLagRunner(_Runner):
