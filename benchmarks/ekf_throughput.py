@@ -16,7 +16,7 @@ import numpy as np
 
 from benchmarks._common import RESULTS, save
 from benchmarks.peers import FilterPyEKF
-from odomgraph.estimators.ekf import EKF
+from odomgraph.estimators.ekf import EKF, EKFOptions
 from odomgraph.estimators.schedule import Hold, Schedule
 from odomgraph.sim.scenarios import paper, yard
 from odomgraph.sim.simulate import simulate
@@ -32,7 +32,7 @@ def main(argv=None):
         sch = Schedule(sc.calibrate_until, Hold.pseudo)
         ours, peer = [], []
         for _ in range(args.repeats):
-            a = EKF(log, sch).run()
+            a = EKF(log, sch, EKFOptions(encoder_scale_gain=True)).run()   # the paper's update, as the peer's
             b = FilterPyEKF(log, sch).run()
             ours.append(a.wall_time_s)
             peer.append(b.wall_time_s)

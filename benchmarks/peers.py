@@ -3,8 +3,8 @@
 ``FilterPyEKF`` is the paper's EKF built on FilterPy's ExtendedKalmanFilter:
 the same models (factors), process noise, schedule and event loop, with
 FilterPy doing every predict and update. It only supports the paper's literal
-pseudo-update hold (FilterPy has no consider update); the gate is ours, applied
-before FilterPy's update.
+pseudo-update hold and the paper's encoder update (EKFOptions.encoder_scale_gain:
+FilterPy has no consider update); the gate is ours, applied before FilterPy's update.
 """
 from __future__ import annotations
 
@@ -14,7 +14,7 @@ from filterpy.kalman import ExtendedKalmanFilter
 from odomgraph.factors._math import wrap_angle
 from odomgraph.factors.motion import propagate
 from odomgraph import state as S
-from odomgraph.estimators.ekf import EKF, add_process_noise
+from odomgraph.estimators.ekf import EKF, EKFOptions, add_process_noise
 from odomgraph.estimators.schedule import Hold, Schedule
 
 
@@ -22,6 +22,9 @@ class FilterPyEKF(EKF):
     def __init__(self, log, schedule: Schedule = Schedule(hold=Hold.pseudo), **kw):
         if schedule.hold is not Hold.pseudo:
             raise ValueError("FilterPy has no consider update: use Hold.pseudo")
+        kw.setdefault("options", EKFOptions(encoder_scale_gain=True))
+        if not kw["options"].encoder_scale_gain:
+            raise ValueError("FilterPy has no consider update: use EKFOptions(encoder_scale_gain=True)")
         super().__init__(log, schedule, **kw)
         self.fp = ExtendedKalmanFilter(dim_x=S.N, dim_z=1)
         self.fp.x = self.x
@@ -45,8 +48,8 @@ class FilterPyEKF(EKF):
         fp.predict()
         self.x, self.P, self.t = fp.x, fp.P, t
 
-    def update(self, z, h, H, idx, R, gate=None, ref=None) -> float:
-        assert not self.holding_scale
+    def update(self, z, h, H, idx, R, gate=None, ref=None, no_gain=None) -> float:
+        assert not self.holding_scale and no_gain is None
         Hfull = np.zeros((H.shape[0], S.N))
         Hfull[:, idx] = H
         fp = self.fp

@@ -311,7 +311,8 @@ def wheel_speed_units(results: Path) -> str:
     d = _shrinkage(sh)
     gps = sorted({s for s, _ in d})
     g = gps[_near(gps, 0.34)]
-    ekf, plain = d[(g, "ekf")], d[(g, "batch, plain walks")]
+    ekf, plain = d[(g, "ekf, paper's encoder gain")], d[(g, "batch, plain walks")]
+    default = d[(g, "ekf")]
     z = [abs(m) / s for r in (ekf, plain) for m, s in zip(r["mean_pct"], r["spread_pct"])]
     cut = [1 - abs(b) / abs(p) for s in gps
            for b, p in zip(d[(s, "batch")]["mean_pct"], d[(s, "batch, plain walks")]["mean_pct"])]
@@ -319,11 +320,13 @@ def wheel_speed_units(results: Path) -> str:
     return ("- **Random walks in wheel-speed units (the smoothers, with a calibration window).**\n"
             "  A Gaussian walk on the speeds is cheapest when the speeds are small, and\n"
             "  the encoder model lets larger scale factors pay for smaller speeds. With\n"
-            "  GPS as the only speed reference, both the EKF and a plain smoother\n"
+            "  GPS as the only speed reference, both the paper's EKF and a plain smoother\n"
             f"  overestimate ticks per metre and underestimate track width: at {g:g} m GPS\n"
-            f"  by {_rng([abs(v) for v in ekf['mean_pct']])} % (EKF) and "
+            f"  by {_rng([abs(v) for v in ekf['mean_pct']])} % (the paper's EKF) and "
             f"{_rng([abs(v) for v in plain['mean_pct']])} % (plain smoother),\n"
-            f"  {_rng(z, '{:.1f}')} times their spread over seeds. The smoothers take the\n"
+            f"  {_rng(z, '{:.1f}')} times their spread over seeds (the default EKF, whose encoder\n"
+            f"  gain leaves the common scale alone: {_rng([abs(v) for v in default['mean_pct']])} %). "
+            "The smoothers take the\n"
             "  v and slip steps as scale × speed, which no such trade can cheapen. That\n"
             f"  removes {_rng([100 * c for c in cut], '{:.0f}')} % of the plain smoother's bias (each scale factor, "
             f"GPS σ {gps[0]:g}–{gps[-1]:g} m);\n"
@@ -548,28 +551,51 @@ def weak_gps(results: Path) -> str:
     d = _load("weak_gps", results)
     r, n = d["rows"], len(d["seeds"])
 
-    def worst(m):
-        return max(max(abs(v) for v in e) for e in r[m]["error_pct"])
+    def worst(rows, m):
+        return max(max(abs(v) for v in e) for e in rows[m]["error_pct"])
 
     flagged = "; ".join(f"{m} {r[m]['n_flagged']} of {n}" for m in ("ekf", "isam2", "fixed-lag", "batch"))
-    return ("- **Speed shrinkage with a weak speed reference** ([benchmarks](benchmarks/README.md),\n"
-            "  \"Speed shrinkage\") is worst in the EKF, which keeps the plain velocity\n"
-            f"  walk. With {d['gps_sigma']:g} m GPS at {d['gps_hz']:g} Hz on the paper scenario (seeds "
+    return ("- **Scale factors from a weak speed reference** ([benchmarks](benchmarks/README.md),\n"
+            "  \"Speed shrinkage\"). With "
+            f"{d['gps_sigma']:g} m GPS at {d['gps_hz']:g} Hz on the paper scenario (seeds "
             f"{d['seeds'][0]}–{d['seeds'][-1]},\n"
-            f"  σ configured truthfully) the EKF put ticks/m up to {worst('ekf'):.0f} % off, "
-            f"{r['ekf']['max_abs_z']:.1f}σ;\n"
-            f"  the smoothers, whose walks are in wheel-speed units, stay within {worst('batch'):.1f} % "
-            f"(batch),\n  {worst('isam2'):.1f} % (isam2) and {worst('fixed-lag'):.1f} % (fixed-lag): "
+            f"  σ configured truthfully) the EKF put ticks/m up to {worst(r, 'ekf'):.1f} % off, "
+            f"{r['ekf']['max_abs_z']:.1f}σ at worst;\n"
+            f"  the smoothers, whose walks are in wheel-speed units, stay within {worst(r, 'batch'):.1f} % "
+            f"(batch),\n  {worst(r, 'isam2'):.1f} % (isam2) and {worst(r, 'fixed-lag'):.1f} % (fixed-lag): "
             f"{r['batch']['max_abs_z']:.1f}, {r['isam2']['max_abs_z']:.1f} and "
             f"{r['fixed-lag']['max_abs_z']:.1f}σ at worst.\n"
-            "  The EKF's is not fixed but flagged: the fixes' own windowed scale\n"
+            "  Whatever is left is checked: the fixes' own windowed scale\n"
             "  (`analysis/pathscale.py`: each 10–160 s window of the wheels' path\n"
             "  fitted to its fixes by a rotation, a translation and one scale common\n"
-            "  to all windows) finds the path longer than the estimate's scale factors\n"
-            "  make it, and the run is `degraded` with a warning that says by how\n"
-            f"  much. Flagged: {flagged}. A GPS σ that the noise model widens\n"
-            "  (persistent errors) moves a log towards that regime.\n"
-            + _weak_long(d) + "\n\n  " + _source("weak_gps", d))
+            "  to all windows) is compared with the estimate's, and a run it disagrees\n"
+            "  with is `degraded` with a warning that says by how much. Flagged: "
+            f"{flagged}.\n" + _weak_whole(d) + _weak_long(d) + "\n\n  " + _source("weak_gps", d))
+
+
+def _weak_whole(d: dict) -> str:
+    """The calibrate-throughout case of weak_gps.json: the paper's encoder gain against the default EKF."""
+    w = d.get("whole")
+    if not w:
+        return ""
+    parts = {}
+    for row in ("ekf, paper's encoder gain", "ekf", "batch"):
+        errs = [max(abs(v) for v in e) for sc in w["rows"].values() for e in sc[row]["error_pct"]]
+        zs = [max(abs(v) for v in e) for sc in w["rows"].values() for e in sc[row]["z"]]
+        fl = sum(sc[row]["n_flagged"] for sc in w["rows"].values())
+        runs = sum(len(sc[row]["flagged"]) for sc in w["rows"].values())
+        parts[row] = (f"{_rng(errs, '{:.1f}')} % off, {_rng(zs, '{:.1f}')}σ, flagged {fl} of {runs}"
+                      if errs else "no run finished")
+    scen = ", ".join(w["rows"])
+    return ("  Calibrating throughout a weaker log "
+            f"({w['gps_sigma']:g} m GPS at {w['gps_hz']:g} Hz, {w['duration_s']:g} s; {scen}),\n"
+            f"  the paper's encoder update (`EKFOptions.encoder_scale_gain`) put ticks/m\n"
+            f"  {parts['ekf, paper' + chr(39) + 's encoder gain']}. The wheels measure ticks/m × speed and\n"
+            "  carry no information on the common scale, but a gain along it lets\n"
+            "  the filter relinearise that product at every speed it passes and\n"
+            "  gain information that is not in the data. The default EKF has no\n"
+            f"  encoder gain along the common scale: {parts['ekf']}; batch\n"
+            f"  {parts['batch']}.\n")
 
 
 def _weak_long(d: dict) -> str:
@@ -587,7 +613,7 @@ def _weak_long(d: dict) -> str:
             f"{lg['gps_sigma']:g} m GPS\n  at {lg['gps_hz']:g} Hz) the smoothers' common scale comes out "
             f"{_rng(errs, '{:.1f}')} % off, up to\n  {max(zs):.1f} of their sigmas, and the check, which "
             f"there is about as uncertain as\n  the error (z {_rng(checks, '{:.1f}')}), flagged {flagged} of "
-            f"{runs} runs; {stopped} run(s) stopped\n  (isam2: the solver failed). Read scale factors from such "
+            f"{runs} runs; {stopped} run(s) stopped. Read scale factors from such\n  "
             "logs as a few per cent at best.")
 
 
@@ -759,7 +785,8 @@ def speed_shrinkage(results: Path) -> str:
             + " | ".join(f"{m:+.2f} ± {s:.2f}" for m, s in zip(r["mean_pct"], r["spread_pct"])) + " |"
             for r in d.values()]
     g = gps[_near(gps, 0.34)]
-    ekf = {s: d[(s, "ekf")]["mean_pct"] for s in gps}
+    ekf = {s: d[(s, "ekf, paper's encoder gain")]["mean_pct"] for s in gps}
+    ekf_default = {s: d[(s, "ekf")]["mean_pct"] for s in gps}
     ticks, track = ekf[g][:2], ekf[g][2]
     slope = math.log(abs(ekf[gps[-1]][0]) / abs(ekf[gps[0]][0])) / math.log(gps[-1] / gps[0])
     cut = [1 - abs(b) / abs(p) for s in gps
@@ -772,18 +799,27 @@ def speed_shrinkage(results: Path) -> str:
         f"Mean ± spread over seeds of the final error, % (Monte-Carlo configuration 1, {sh['seeds']} seeds per "
         "point).", "",
         "| GPS σ m | estimator | ticks/m L | ticks/m R | track |", "|---|---|---|---|---|", *rows, "",
-        "- **Both estimators overestimate ticks per metre and underestimate track\n"
-        "  width when GPS is poor, by several times their own spread.** At "
-        f"{g:g} m\n  GPS the EKF is {_rng(ticks, '{:+.1f}')} % and {_minus(f'{track:+.1f}')} %, and at {gps[-1]:g} m "
+        "- **The paper's EKF and the plain smoother overestimate ticks per metre and\n"
+        "  underestimate track width when GPS is poor, by several times their own\n"
+        f"  spread.** At {g:g} m GPS the paper's EKF is {_rng(ticks, '{:+.1f}')} % and "
+        f"{_minus(f'{track:+.1f}')} %, and at {gps[-1]:g} m "
         f"{_rng(ekf[gps[-1]][:2], '{:+.1f}')} %. The errors of the\n"
         "  two wheels and the track move together, so the estimated speeds are\n"
         "  shrunk while the headings stay right.",
-        "- **The cause is a Gaussian random walk on the speeds.** It is cheapest when\n"
+        "- **Most of the EKF's share is its encoder gain along the common scale.**\n"
+        "  The wheels measure ticks/m × speed, so ticks/m × (1 + e), track / (1 + e)\n"
+        "  and speed / (1 + e) predict the same ticks; the paper's update still\n"
+        "  moves the state along that direction, and relinearised at every speed\n"
+        "  it passes it gains information that is not in the data. The default EKF\n"
+        "  has no gain along it (`EKFOptions.encoder_scale_gain`, a Schmidt consider\n"
+        f"  update in that one direction): {g:g} m {_rng(ekf_default[g][:2], '{:+.1f}')} %, "
+        f"{gps[-1]:g} m {_rng(ekf_default[gps[-1]][:2], '{:+.1f}')} % (ticks/m).",
+        "- **The smoother's cause is the Gaussian random walk on the speeds.** It is cheapest when\n"
         "  every speed change is small, and the encoder model (k (v + slip) =\n"
         "  measured) lets larger scale factors pay for smaller speeds. The bias is\n"
         "  then about (the walk's cost of the manoeuvres) / (GPS information on the\n"
         f"  path's size). For the 20 s calibration window at {g:g} m GPS a rough\n"
-        f"  count of both comes out near the measured {_rng(ticks, '{:.1f}')} %, and the EKF's bias grows\n"
+        f"  count of both comes out near the paper's EKF's {_rng(ticks, '{:.1f}')} %, whose bias grows\n"
         f"  about as GPS σ^{slope:.1f} from {gps[0]:g} to {gps[-1]:g} m.",
         "- **The batch smoother now takes the v and slip random walks in\n"
         "  wheel-speed units** (scale × speed, relative to the initial scales). Then\n"
@@ -1063,9 +1099,11 @@ def montecarlo_discussion(results: Path) -> str:
         f"  Slip is {_rng(ratio['slip_left'] + ratio['slip_right'])}×, ticks per metre "
         f"{_rng(ratio['scale_left'] + ratio['scale_right'])}× and track width {_rng(ratio['scale_track'])}× "
         "(medians over grid\n"
-        "  points). At poor GPS much of that margin is the EKF's speed-shrinkage\n"
-        "  bias (section \"Speed shrinkage\"), which the smoother's wheel-speed units\n"
-        "  reduce. Where the smoother is not better everywhere (every grid point of each region):\n"
+        "  points). The study runs the paper's EKF (its encoder gain on every scale\n"
+        "  direction, `StudySpec.paper_ekf`); at poor GPS much of the margin is that\n"
+        "  filter's speed-shrinkage bias (section \"Speed shrinkage\"), which the\n"
+        "  default EKF and the smoother's wheel-speed units reduce. Where the smoother is not\n"
+        "  better everywhere (every grid point of each region):\n"
         f"  - Track width with very precise ranges (config 3, range σ {g3.xs[0]:g} m):\n"
         f"    {_rng(r1)}× the EKF's ({_above(r1)} gyro σ), at the "
         f"{_rng(ex['level'](ex['r1'], 'batch'))} % level. That is where the\n"

@@ -22,7 +22,8 @@ from benchmarks._common import save
 
 GPS = (0.05, 0.15, 0.34, 0.7)
 SEEDS = 16
-VARIANTS = {"ekf": ("ekf", {}), "batch": ("batch", {}),
+VARIANTS = {"ekf": ("ekf", {}), "ekf, paper's encoder gain": ("ekf", {"encoder_scale_gain": True}),
+            "batch": ("batch", {}),
             "batch, plain walks": ("batch", {"wheel_speed_units": False}),
             "isam2": ("isam2", {}), "fixed-lag": ("fixed-lag", {})}
 

@@ -14,7 +14,10 @@ a measurement with Jacobian H = [H_a H_b] and noise R updates
     P_ab -= K_a (H_a P_ab + H_b P_bb),             P_ba = P_ab'
     P_bb  unchanged
 
-(Schmidt's consider update; with b empty, the Kalman filter). Its prediction
+(Schmidt's consider update; with b empty, the Kalman filter). Before the
+switch, an encoder update considers one direction instead, the common scale
+(EKFOptions.encoder_scale_gain): the same update in orthonormal coordinates
+whose last axis is that direction. Its prediction
 is the exact-arc motion model with the process noise of the EKF's module
 docstring, built as one dense Q. Both run over the same measurements from the
 same initial state, and every state and covariance they produce agree to
@@ -60,6 +63,25 @@ def schmidt_update(x, P, y, H, R, considered):
         out[np.ix_(b, a)] = out[np.ix_(a, b)].T
         out[np.ix_(b, b)] = Pbb
     return x, out
+
+
+def schmidt_update_along(x, P, y, H, R, u):
+    """The Schmidt update with one direction u (n,) (unit) considered: in
+    orthonormal coordinates whose last axis is u that axis is a considered
+    state (schmidt_update), and the result is rotated back."""
+    n = len(x)
+    Q, _ = np.linalg.qr(np.column_stack([u, np.eye(n)]))
+    T = np.roll(Q, -1, axis=1)                  # last column +-u, the rest spans its complement
+    z, Pz = schmidt_update(T.T @ x, T.T @ P @ T, y, H @ T, R, [n - 1])
+    return T @ z, T @ Pz @ T.T
+
+
+def common_scale(x):
+    """The wheels' blind direction (EKFOptions.encoder_scale_gain): ticks/m
+    left and right up, the track scale down, by the same relative amount."""
+    u = np.zeros(S.N)
+    u[SCALE] = x[SCALE] * np.array([1.0, 1.0, -1.0])
+    return u / np.linalg.norm(u)
 
 
 def dense_predict(x, P, dt, pn, q_slip):
@@ -124,7 +146,10 @@ def reference_run(ekf: EKF, t_switch: float):
         else:
             h, J = velocity.body_velocity(x[3], x[4])
             y, H, R = m.velocity[1][i] - h, _dense(J, [3, 4]), np.diag(np.square(r.velocity_sigma))
-        x, P = schmidt_update(x, P, y, H, R, held)
+        if code == 0 and not held:   # the encoders say nothing along the common scale
+            x, P = schmidt_update_along(x, P, y, H, R, common_scale(x))
+        else:
+            x, P = schmidt_update(x, P, y, H, R, held)
         x[2] = _wrap(x[2])
         if code == 0:
             rows_t.append(t)

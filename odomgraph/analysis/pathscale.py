@@ -1,7 +1,8 @@
 """Does the estimate's distance scale agree with the fixes? A check that no estimator can bend.
 
-With a weak speed reference (0.5 m GPS at 2 Hz) the EKF overestimates
-ticks per metre by up to 14 %, 7 of its own sigmas, and so did isam2 and
+With a weak speed reference (0.5 m GPS at 2 Hz) the paper's EKF update
+(EKFOptions.encoder_scale_gain) overestimates ticks per metre by up to 14 %,
+7 of its own sigmas, and so did isam2 and
 fixed-lag (6 %) before their walks were taken in wheel-speed units
 (benchmarks/results/weak_gps.md): a Gaussian random walk on the speeds is
 cheapest when the speeds are small, and the encoder model lets the scale

@@ -22,8 +22,8 @@ from odomgraph.factors._math import wrap_angle
 from odomgraph.factors.motion import propagate
 from odomgraph import state as S
 from odomgraph.errors import EstimatorDivergedError
-from odomgraph.estimators.ekf import (GATE_HISTORY, MAX_RECOVERIES, EKFOptions, gate_thresholds, jumped,
-                                      make_estimate, reacquire_widening, watch_widening)
+from odomgraph.estimators.ekf import (GATE_HISTORY, MAX_RECOVERIES, EKFOptions, common_scale_direction,
+                                      gate_thresholds, jumped, make_estimate, reacquire_widening, watch_widening)
 from odomgraph.estimators.sensors import (DOF, ENC_IDX, GATED, GPS, GYRO, GYRO_IDX, POSE_IDX, RANGE, SCALE_IDX,
                                          SENSOR_NAMES, SLIP_IDX, VEL, VEL_IDX, WHEEL, event_stream)
 from odomgraph.estimators.initial import initial_state
@@ -161,7 +161,7 @@ def run_ekf_many(logs: list[Log], schedule: Schedule = Schedule(), options: EKFO
         hk = hist.get(key, [])
         return None if len(hk) < 3 else np.median(np.stack(hk), 0)
 
-    def update(z, h, H, idx, R, gate=None, ref=None, no_ref=None):
+    def update(z, h, H, idx, R, gate=None, ref=None, no_ref=None, no_gain=None):
         """Batched Kalman update (see EKF.update); returns (N,) NIS, negative where gated.
         no_ref: (N,) runs that get no rescue from ``ref`` (held out after a jump)."""
         nonlocal x, P, last_y
@@ -183,6 +183,8 @@ def run_ekf_many(logs: list[Log], schedule: Schedule = Schedule(), options: EKFO
             nis = np.where(rej, -nis, nis)
         if holding:
             K[:, SCALE_IDX, :] = 0.0
+        elif no_gain is not None:       # (N, 11) unit directions (EKF.update)
+            K = K - no_gain[:, :, None] * np.einsum("ni,nij->nj", no_gain, K)[:, None, :]
         x = x + np.einsum("nij,nj->ni", K, y)
         x[:, 2] = wrap_angle(x[:, 2])
         IKH = np.broadcast_to(_I, P.shape).copy()
@@ -223,7 +225,8 @@ def run_ekf_many(logs: list[Log], schedule: Schedule = Schedule(), options: EKFO
                 s2 = wheel_s2[:, i]
                 Rw = np.zeros((n, 2, 2))
                 Rw[:, 0, 0], Rw[:, 1, 1] = s2[:, 0], s2[:, 1]
-                nis = update(wheel_m[:, i], h, H, ENC_IDX, Rw)
+                nis = update(wheel_m[:, i], h, H, ENC_IDX, Rw,
+                             no_gain=None if opt.encoder_scale_gain else common_scale_direction(x))
                 d = np.diagonal(P, 0, 1, 2)
                 bad = ~(np.isfinite(x).all(1) & np.isfinite(d).all(1)) | (d < -1e-12).any(1)
                 far = (np.abs(x[:, S.SCALE] - 1.0).max(1) > opt.max_scale_error) | (x[:, S.SCALE].min(1) < 0.05)
