@@ -614,6 +614,11 @@ def montecarlo(
     seed: Annotated[int, typer.Option(help="Study seed (every run's seed derives from it).")] = 0,
     smoother: Annotated[bool, typer.Option("--smoother/--no-smoother",
                                            help="Also run the batch smoother on every run.")] = True,
+    paper_ekf: Annotated[bool, typer.Option(
+        "--paper-ekf/--default-ekf",
+        help="The EKF as the paper ran it, its encoder update moving the scale factors in every "
+             "direction (as in the paper's figures); --default-ekf: odomgraph's EKF, whose encoder "
+             "gain leaves the common scale to the absolute sensors (EKFOptions.encoder_scale_gain).")] = True,
     workers: Annotated[Optional[int], typer.Option(help="Local worker processes (default: all cores).")] = None,
     scheduler: Annotated[Optional[str], typer.Option(
         help="Dask scheduler address tcp://HOST:PORT: run the points on that cluster instead "
@@ -634,7 +639,8 @@ def montecarlo(
                              "then slip) and 1e5 s")
     if workers is not None and workers < 1:
         raise OdomgraphError(f"--workers must be at least 1, got {workers}")
-    spec = StudySpec.grid(config, grid, runs=runs, duration=duration, seed=seed, smoother=smoother)
+    spec = StudySpec.grid(config, grid, runs=runs, duration=duration, seed=seed, smoother=smoother,
+                          paper_ekf=paper_ekf)
     try:
         with _Progress(f"config {config}: {grid}x{grid} points x {runs} runs") as bar:
             results = run_study(spec, output, workers=workers, scheduler=scheduler, progress=bar)
