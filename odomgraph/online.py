@@ -95,6 +95,9 @@ NIS_WARN = 3.0
 #: Restarts after a divergence (Online._restart) before the stream gives up and says why.
 MAX_RESTARTS = 20
 #: Margin [s] past the calibration window (or start-pose fit) that the warm-up adds.
+#: Floor [-] of the scale factors' prior 1-sigma after a restart (_restart): the
+#: calibration carried over is held to what was known of it, not to a few 1e-3.
+RESTART_SCALE_SIGMA = 0.005
 WARMUP_MARGIN = 5.0
 
 
@@ -470,9 +473,16 @@ class Online:
             sc = self.last.mean[8:11]
             if np.all(np.abs(sc - 1.0) < 0.1):
                 r = self.robot
+                # Kept with what was known of them (3 sigma, at least RESTART_SCALE_SIGMA): a
+                # restart wide in pose, in the middle of a slip, otherwise trades the
+                # scale factors against the unknowns of its first seconds, and frozen
+                # linearisations from then kept a track scale 6 % off at 15 sigma.
+                sig = float(min(r.process.initial_scale_sigma,
+                                max(RESTART_SCALE_SIGMA, 3.0 * float(np.max(self.last.sigma[8:11] / self._base)))))
                 self.robot = r.with_(ticks_per_meter_left=r.ticks_per_meter_left * float(sc[0] / self._base[0]),
                                      ticks_per_meter_right=r.ticks_per_meter_right * float(sc[1] / self._base[1]),
-                                     track_width=r.track_width * float(sc[2] / self._base[2]))
+                                     track_width=r.track_width * float(sc[2] / self._base[2]),
+                                     process=dc_replace(r.process, initial_scale_sigma=sig))
                 self._base = np.array(sc, float)
             self.robot = self.robot.with_(initial=InitialPose(x, y, th, (max(3 * sx, 1.0), max(3 * sy, 1.0),
                                                                          max(3 * sth, 0.5))))

@@ -45,7 +45,7 @@ from odomgraph.checks import bounded
 from odomgraph.errors import EstimatorDivergedError
 from odomgraph.estimators.batch import (HELD_SIGMA, GraphOptions, build_problem, factor_arrays, marginal_blocks,
                                         retract, smoother_estimate, solve_window)
-from odomgraph.estimators.graph import NB, Problem, linearize, walk_rows
+from odomgraph.estimators.graph import NB, Problem, linearize, slip_prior_rows, walk_rows
 from odomgraph.result import Estimate
 from odomgraph.estimators.schedule import Schedule
 from odomgraph.io.log import Log
@@ -138,6 +138,8 @@ class _Graph:
         self.rearm: set[tuple] = set()            # hold expired: no new jump until one is accepted
         self.last_t: dict[tuple, float] = {}      # (sensor, beacon) -> time of its previous measurement
         self.gated: dict[str, int] = {}
+        # interval -> (slip in wheel-speed units, scale factors) where its slip prior was last linearised
+        self.slip_at: dict[int, tuple[np.ndarray, np.ndarray]] = {}
         self.gated_rows: set[tuple[str, int]] = set()   # ("gps" | "ranges", index) gated at first linearisation
         self.held_rows: set[tuple[str, int]] = set()    # those of them held out as a jump: never used
 
@@ -286,7 +288,64 @@ class _Graph:
         g.add(gtsam.LinearContainerFactor(jf, lp))
         if self.prob.wheel_speed_units:
             g.push_back(self.walk_factors(k, pose, W, lp))
+        if self.linear_slip_prior(k):
+            g.add(self.slip_factor(k, W))      # last: refresh_slip_priors replaces it alone
         return g
+
+    def linear_slip_prior(self, k: int) -> bool:
+        """Interval k's sparse (Cauchy) slip prior is a linear factor
+        (slip_factor), not a built-in: in wheel-speed units it is on scale x
+        slip, which no built-in factor can say (graph.slip_prior_rows).
+
+        The window's zero-slip pseudo-prior stays a built-in on the slip: it
+        holds the slip at zero, where the two forms agree and there is nothing
+        to pull the scale with. Frozen as a linear factor at a slip far from
+        zero (a start or a restart far off), its tight rows would tie the
+        scale factors to that slip for good (measured: a restarted stream's
+        track scale 9 % off at 25 sigma)."""
+        return self.prob.wheel_speed_units and not self.prob.zero_slip[k] and self.prob.slip_robust is not None
+
+    def slip_factor(self, k: int, W) -> gtsam.LinearContainerFactor:
+        """Interval k's slip prior, linearised at W[k] (graph.slip_prior_rows):
+        a LinearContainerFactor on (S_k, W_k). Its Cauchy weight is that of
+        the slip it was linearised at, so the runners re-linearise it while the
+        slip moves (refresh_slip_priors), as ISAM2 re-linearises a built-in."""
+        b, A, _ = slip_prior_rows(self.prob, W[k:k + 1], self.prob.zero_slip[k:k + 1])
+        Aw = np.zeros((2, len(W_IDX)))
+        Aw[:, [W_IDX.index(5), W_IDX.index(6)]] = A[0][:, 2:4]
+        jf = gtsam.JacobianFactor(S_KEY(k), A[0][:, 0:2], W_KEY(k), Aw, b[0], gtsam.noiseModel.Unit.Create(2))
+        lp = gtsam.Values()
+        lp.insert(W_KEY(k), W[k, W_IDX].copy())
+        lp.insert(S_KEY(k), W[k, S_IDX].copy())
+        self.slip_at[k] = (self.wheel_slip(W[k]), W[k, 5:7].copy())
+        return gtsam.LinearContainerFactor(jf, lp)
+
+    def wheel_slip(self, w: np.ndarray) -> np.ndarray:
+        """(2,) the slips of W row w (8,) in wheel-speed units [m/s]: (k_i / ref_i) s_i."""
+        return w[5:7] / np.asarray(self.prob.speed_ref, float)[0:2] * w[3:5]
+
+    def refresh_slip_priors(self, lo: int, hi: int, W, linear_index: dict, factors, remove: list) -> list[int]:
+        """Re-linearise the slip priors of intervals lo <= j < hi whose slip or
+        scale factors moved by more than the relinearisation thresholds ISAM2
+        gives them (_params: 0.2 c, 4e-3 x relinearize_threshold) since they
+        were linearised: the replacement goes into
+        ``factors``, the old factor's index into ``remove``. Returns the
+        intervals refreshed, in the order their factors were added. Older
+        intervals are forgotten (their values are no longer read back)."""
+        for j in [j for j in self.slip_at if j < lo]:
+            del self.slip_at[j]
+        c = self.options.slip_cauchy if self.options.slip_cauchy is not None else 0.05
+        done = []
+        for j in range(lo, hi):
+            if j not in self.slip_at or j not in linear_index:
+                continue
+            u, sc = self.slip_at[j]
+            if (np.max(np.abs(self.wheel_slip(W[j]) - u)) > 0.2 * c
+                    or np.max(np.abs(W[j, 5:7] - sc)) > 4e-3 * self.options.relinearize_threshold):
+                remove.append(linear_index[j][-1])
+                factors.add(self.slip_factor(j, W))
+                done.append(j)
+        return done
 
     def walk_factors(self, k: int, pose, W, lp: gtsam.Values) -> gtsam.NonlinearFactorGraph:
         """The random walks of W and S from keyframe k to k+1 in wheel-speed
@@ -328,7 +387,7 @@ class _Graph:
                                             gtsam.noiseModel.Gaussian.Covariance(Q[np.ix_(S_IDX, S_IDX)])))
         if prob.zero_slip[k]:
             g.add(gtsam.PriorFactorVector(S_KEY(k), np.zeros(2), self.zero_model))
-        elif self.robust_model is not None:
+        elif self.robust_model is not None and not self.linear_slip_prior(k):    # else: slip_factor
             g.add(gtsam.PriorFactorVector(S_KEY(k), np.zeros(2), self.robust_model))
         return g
 
@@ -604,11 +663,15 @@ class ISAM2Runner(_Runner):
             self._relin_next = j + 1
         else:
             extra = None
+        n_before = factors.size()
+        fresh = self.graph.refresh_slip_priors(self._relin_next, k - 1, self.W, self.linear_index, factors, remove)
         res = isam.update(factors, values, remove)
         idx = list(res.getNewFactorsIndices())
         self.linear_index[k - 1] = idx[:n_lin]
         if extra is not None:
-            self.linear_index[j] = idx[factors.size() - extra.size():]
+            self.linear_index[j] = idx[n_before - extra.size():n_before]
+        for pos, i in enumerate(fresh):
+            self.linear_index[i][-1] = idx[n_before + pos]
         # Read back what the relinearisation window needs (and the newest keyframe).
         lo = max(0, min(self._relin_next, k - 1))
         for i in range(lo, k + 1):
@@ -1021,11 +1084,21 @@ class FixedLagRunner(_Runner):
             for i in range(extra.size()):
                 factors.add(extra.at(i))
             self._relin_next = j + 1
+        # Slip priors of intervals still in the window whose slip moved (not
+        # one this update marginalises: a factor on a marginalised key is gone).
+        n_before = factors.size()
+        lo = int(np.searchsorted(kf.t, kf.t[k] - self.options.lag + kf.dt[k - 1] - 1e-12))
+        lo = max(lo, self._relin_next)
+        while lo < k - 1 and self.done[lo]:
+            lo += 1
+        fresh = self.graph.refresh_slip_priors(lo, k - 1, self.W, self.linear_index, factors, remove)
         self._update(factors, values, [k], remove)
         idx = list(self.smoother.getISAM2Result().getNewFactorsIndices())
         self.linear_index[k - 1] = idx[:n_lin]
         if extra is not None:
-            self.linear_index[j] = idx[factors.size() - extra.size():]
+            self.linear_index[j] = idx[n_before - extra.size():n_before]
+        for pos, i in enumerate(fresh):
+            self.linear_index[i][-1] = idx[n_before + pos]
         est = self.smoother.calculateEstimate()
         # Read back what the next re-linearisation needs, and the newest keyframes.
         for i in range(min(self._relin_next, k - 1), k + 1):
