@@ -499,6 +499,7 @@ class Online:
         firsts = [rows[0][0] for rows in self._raw.values() if rows]
         self.t_first = min(firsts) if firsts else None
         self.ekf = self.smoother = None
+        self._settle_said = 0            # the new runner's settle warnings start from none
         self.t_done = -math.inf
         self.restarts.append(f"t={t_r:.2f} s: {' '.join(str(exc).split())}; restarted from the last estimate's "
                              f"pose (sigma widened) and scale factors, warming up again for {self.warmup:g} s")

@@ -164,7 +164,8 @@ def widen_rows(t: np.ndarray, sigma: np.ndarray, pose_cov: np.ndarray | None, un
 def warning(until: float, t0: float) -> str:
     """The one-line warning of a stretch with the heading unknown."""
     if until == math.inf:
-        return ("heading not observable: the robot neither drove nor turned (fixes and wheels show no motion); "
-                "heading sigma is pi, and x, y sigma include the GPS lever-arm circle")
+        return ("heading not observable: no motion showed which way the robot points (the wheels' path, or the "
+                "fixes' trailing median, never moved 3 fix sigmas, at least 5 cm, from where it started); heading "
+                "sigma is pi, and x, y sigma include the GPS lever-arm circle")
     return (f"heading not observable until t={until - t0:.1f} s, when the robot first moved: before it, heading "
             "sigma is pi and x, y sigma include the lever-arm circle")

@@ -142,6 +142,8 @@ class _Graph:
         self.slip_at: dict[int, tuple[np.ndarray, np.ndarray]] = {}
         self.gated_rows: set[tuple[str, int]] = set()   # ("gps" | "ranges", index) gated at first linearisation
         self.held_rows: set[tuple[str, int]] = set()    # those of them held out as a jump: never used
+        self.reject_run: dict[tuple, int] = {}    # (sensor, beacon) -> rejections in a row (not a held jump)
+        self.lost: str | None = None              # a run of REJECT_RUN rejections, for the divergence watch
 
     def values(self, k: int, pose, W) -> gtsam.Values:
         v = gtsam.Values()
@@ -231,6 +233,20 @@ class _Graph:
                         self._hold(key[0], j)
         if held and not reject:
             del self.jump[key]                         # it came back: the jump is over
+        # The watch sees only what the gate lets through: an estimate walked
+        # away from its sensor would see every later measurement rejected, and
+        # nothing would say so (measured: 14 km off at sigma 3 m on 10 m fixes
+        # at 0.2 Hz). A run of rejections that is no held jump is a divergence,
+        # as the EKF's reacquire_after.
+        if not reject:
+            self.reject_run[key] = 0
+        elif not held:
+            run = self.reject_run[key] = self.reject_run.get(key, 0) + 1
+            if run >= REJECT_RUN:
+                what = "GPS fixes" if key[0] == "gps" else f"ranges to beacon {key[1]}"
+                self.lost = (f"the last {run} {what} were all rejected at first linearisation (far from the "
+                             "estimate and from the sensor's recent level)")
+                self.reject_run[key] = 0
 
     def _hold(self, sensor: str, i: int) -> None:
         """Fix or range i is held out of later linearisations (_drop_held). A
@@ -408,6 +424,7 @@ class _Runner:
         self.heading_until: float | None = None   # set by a stream (online.py): when its motion showed the heading
         # _watch: per sensor [slow running mean, count, dof, the last few values]
         self._ema = {"GPS fixes": [2.0, 0, 2, []], "ranges": [1.0, 0, 1, []]}
+        self._path = [0, 0.0, 0, 0.0]   # _overshot: keyframe, wheels' path to it [m], fixes seen, largest sigma [m]
         # causal: the online row of interval k is produced at t_{k+1} from data up to t_{k+1}.
         # A stream (estimators.growing) passes the problem it grows.
         self.prob = prob if prob is not None else build_problem(log, schedule, options, causal=True)
@@ -475,14 +492,43 @@ class _Runner:
         t0 = time.perf_counter()
         self._grow(k + 1)
         self._new_keyframe(k)
+        pred = self.pose[k, :2].copy()
         factors = self.graph.interval_factors(k - 1, self.pose, self.W, first=True)
         self.step(k, factors, self.graph.values(k, self.pose, self.W))
         self.update_times[k] = time.perf_counter() - t0
         if not (np.all(np.isfinite(self.pose[k])) and np.all(np.isfinite(self.W[k]))):
             raise EstimatorDivergedError(f"{self.method} diverged at t={self.prob.kf.t[k]:.3f} s: non-finite estimate")
-        reason = self._watch(k - 1)
+        reason = self._overshot(k, pred) or self._watch(k - 1)
         if reason is not None:
             self._trip(k, reason)
+
+    def _overshot(self, k: int, pred: np.ndarray) -> str | None:
+        """The update moved keyframe k from its prediction ``pred`` (x, y) further
+        than any fix could: OVERSHOOT sigmas of the absolute sensor, plus 5
+        sigmas of the start's position, plus twice the wheels' path so far (a
+        heading flipped about the start). One
+        Gauss-Newton step from linearisations at a heading the fixes had not
+        pinned did that, and the next ones doubled it each keyframe (measured:
+        10 m fixes at 0.2 Hz, a settle at 16 s, 18 km off at sigma 5 m by 18 s,
+        between two fixes, which the watch on fixes cannot see)."""
+        kf = self.prob.kf
+        j, d, g, sig = self._path
+        g1 = int(np.searchsorted(kf.gps_k, k))
+        s_new = kf.gps_sigma[g:g1]
+        s_new = s_new[s_new < HELD_SIGMA]               # (a fix held out has no weight: HELD_SIGMA)
+        sig = max(sig, float(s_new.max()) if s_new.size else 0.0,
+                  self.prob.robot.range_sigma if np.searchsorted(kf.rng_k, k) else 0.0)
+        self._path = [k, d + float(np.sum(np.abs(kf.enc_m[j:k].mean(1)) * kf.dt[j:k])), g1, sig]
+        if sig <= 0.0:
+            return None                       # no absolute sensor yet: nothing can move it far
+        jump = float(np.hypot(*(self.pose[k, :2] - pred)))
+        # the start's own uncertainty too (a restart widens it to metres)
+        start = 5.0 * float(np.sqrt(max(self.prob.prior_cov[0, 0], self.prob.prior_cov[1, 1])))
+        limit = OVERSHOOT * sig + start + 2.0 * self._path[1]
+        if jump > limit:
+            return (f"one update moved the estimate {jump:.0f} m from its prediction, more than any fix could "
+                    f"({limit:.0f} m): it overshot")
+        return None
 
     def _estimate(self, Sig: np.ndarray, wall0: float, notes: list[str], **extra) -> Estimate:
         """The run's Estimate from its keyframe marginals Sig (N, 11, 11) (batch.smoother_estimate),
@@ -507,26 +553,17 @@ class _Runner:
         if that was far off (nominal parameters wrong by 2x, say), the estimate
         can walk away from the data while every update looks normal. Post-fit
         residuals of a healthy smoother are at the noise level."""
-        kf, r = self.prob.kf, self.prob.robot
-        x, y, th = self.pose[j]
-        v, w = self.W[j, 0], self.W[j, 1]
-        checks = []
+        if self.graph.lost is not None:
+            reason, self.graph.lost = self.graph.lost, None
+            return reason
+        kf = self.prob.kf
         # Fixes and ranges the first-linearisation gate rejected say nothing about the estimate.
         gated = self.graph.gated_rows
         g0, g1 = np.searchsorted(kf.gps_k, [j, j + 1])
         gi = np.array([i for i in range(g0, g1) if ("gps", i) not in gated], int)
-        if gi.size:
-            tvw = kf.gps_tau_vw[gi]
-            p, _ = arc_at(x, y, th, v, w, tvw[:, 0], tvw[:, 1])
-            h, _ = gps_model.antenna_position(p[:, 0], p[:, 1], p[:, 2], r.gps_lever_arm)
-            checks.append(("GPS fixes", np.sum(((h - kf.gps_xy[gi]) / kf.gps_sigma[gi, None]) ** 2, 1)))
         q0, q1 = np.searchsorted(kf.rng_k, [j, j + 1])
         qi = np.array([i for i in range(q0, q1) if ("ranges", i) not in gated], int)
-        if qi.size:
-            tvw = kf.rng_tau_vw[qi]
-            p, _ = arc_at(x, y, th, v, w, tvw[:, 0], tvw[:, 1])
-            h, _ = ranging.beacon_range(p[:, 0], p[:, 1], p[:, 2], kf.rng_beacon[qi], r.range_lever_arm)
-            checks.append(("ranges", ((h[:, 0] - kf.rng_z[qi]) / r.range_sigma) ** 2))
+        checks = self._post_fit(gi, qi)
         limit = self.options.max_mean_residual
         for name, values in checks:
             e = self._ema[name]
@@ -548,6 +585,26 @@ class _Runner:
                 return (f"the last few {name} sit {np.sqrt(fast / e[2]):.1f} sigma from the estimate "
                         "(expected about 1)")
         return None
+
+    def _post_fit(self, gi: np.ndarray, qi: np.ndarray) -> list[tuple[str, np.ndarray]]:
+        """Whitened squared residuals of GPS fixes gi and ranges qi (indices into
+        the keyframes' arrays) at the current estimate of their keyframes."""
+        kf, r = self.prob.kf, self.prob.robot
+        checks = []
+        for name, idx in (("GPS fixes", gi.astype(int)), ("ranges", qi.astype(int))):
+            if not idx.size:
+                continue
+            ks = (kf.gps_k if name == "GPS fixes" else kf.rng_k)[idx]
+            tvw = (kf.gps_tau_vw if name == "GPS fixes" else kf.rng_tau_vw)[idx]
+            x, y, th = self.pose[ks].T
+            p, _ = arc_at(x, y, th, self.W[ks, 0], self.W[ks, 1], tvw[:, 0], tvw[:, 1])
+            if name == "GPS fixes":
+                h, _ = gps_model.antenna_position(p[:, 0], p[:, 1], p[:, 2], r.gps_lever_arm)
+                checks.append((name, np.sum(((h - kf.gps_xy[idx]) / kf.gps_sigma[idx, None]) ** 2, 1)))
+            else:
+                h, _ = ranging.beacon_range(p[:, 0], p[:, 1], p[:, 2], kf.rng_beacon[idx], r.range_lever_arm)
+                checks.append((name, ((h[:, 0] - kf.rng_z[idx]) / r.range_sigma) ** 2))
+        return checks
 
     def _trip(self, k: int, reason: str) -> None:
         """The watch tripped at keyframe k: re-solve the recent past and carry on,
@@ -589,6 +646,12 @@ def _joint_marginal(isam, k: int) -> np.ndarray:
 #: The first linearisation of a fix or range rejects it beyond this many sigma
 #: from the prediction and from the sensor's recent residuals (_Graph.first_gate).
 FIRST_GATE = 10.0
+#: First-linearisation rejections of one sensor in a row (no held jump) that
+#: count as a divergence (_Graph._gate, _Runner._watch): as EKFOptions.reacquire_after.
+REJECT_RUN = 5
+#: An update that moves the newest keyframe from its prediction by more than this
+#: many sigmas of the absolute sensor (plus twice the path so far) overshot (_overshot).
+OVERSHOOT = 2.0 * FIRST_GATE
 
 #: The fast watch trips when the recent post-fit residuals average this many
 #: times their expected whitened square (about 3.9 sigma per axis).
