@@ -94,10 +94,10 @@ WHEEL_WAIT = 30.0
 NIS_WARN = 3.0
 #: Restarts after a divergence (Online._restart) before the stream gives up and says why.
 MAX_RESTARTS = 20
-#: Margin [s] past the calibration window (or start-pose fit) that the warm-up adds.
 #: Floor [-] of the scale factors' prior 1-sigma after a restart (_restart): the
 #: calibration carried over is held to what was known of it, not to a few 1e-3.
 RESTART_SCALE_SIGMA = 0.005
+#: Margin [s] past the calibration window (or start-pose fit) that the warm-up adds.
 WARMUP_MARGIN = 5.0
 
 
@@ -206,6 +206,7 @@ class Online:
         self.warmup = float(warmup) if warmup is not None else self._default_warmup()
         # scale factors of robot (after a restart: the calibration carried) against robot.toml's
         self._base = np.ones(3)
+        self._scale_sigma = self.robot.process.initial_scale_sigma   # robot.toml's, whatever restarts set
         self._beacons = {b.id: i for i, b in enumerate(robot.beacons)}
         self._heap: list = []                          # (t, seq, sensor, values) not yet released
         self._seq = 0
@@ -477,13 +478,18 @@ class Online:
                 # restart wide in pose, in the middle of a slip, otherwise trades the
                 # scale factors against the unknowns of its first seconds, and frozen
                 # linearisations from then kept a track scale 6 % off at 15 sigma.
-                sig = float(min(r.process.initial_scale_sigma,
+                sig = float(min(getattr(self, "_scale_sigma", r.process.initial_scale_sigma),
                                 max(RESTART_SCALE_SIGMA, 3.0 * float(np.max(self.last.sigma[8:11] / self._base)))))
                 self.robot = r.with_(ticks_per_meter_left=r.ticks_per_meter_left * float(sc[0] / self._base[0]),
                                      ticks_per_meter_right=r.ticks_per_meter_right * float(sc[1] / self._base[1]),
                                      track_width=r.track_width * float(sc[2] / self._base[2]),
                                      process=dc_replace(r.process, initial_scale_sigma=sig))
                 self._base = np.array(sc, float)
+            else:                                   # not carried over: robot.toml's sigma again
+                self.robot = self.robot.with_(process=dc_replace(self.robot.process,
+                                                                 initial_scale_sigma=getattr(
+                                                                     self, "_scale_sigma",
+                                                                     self.robot.process.initial_scale_sigma)))
             self.robot = self.robot.with_(initial=InitialPose(x, y, th, (max(3 * sx, 1.0), max(3 * sy, 1.0),
                                                                          max(3 * sth, 0.5))))
         if self.method is Method.ekf:

@@ -138,12 +138,10 @@ class _Graph:
         self.rearm: set[tuple] = set()            # hold expired: no new jump until one is accepted
         self.last_t: dict[tuple, float] = {}      # (sensor, beacon) -> time of its previous measurement
         self.gated: dict[str, int] = {}
-        # interval -> (slip in wheel-speed units, scale factors) where its slip prior was last linearised
-        self.slip_at: dict[int, tuple[np.ndarray, np.ndarray]] = {}
+        # interval -> its slip in wheel-speed units where its slip prior was last linearised
+        self.slip_at: dict[int, np.ndarray] = {}
         self.gated_rows: set[tuple[str, int]] = set()   # ("gps" | "ranges", index) gated at first linearisation
         self.held_rows: set[tuple[str, int]] = set()    # those of them held out as a jump: never used
-        self.reject_run: dict[tuple, int] = {}    # (sensor, beacon) -> rejections in a row (not a held jump)
-        self.lost: str | None = None              # a run of REJECT_RUN rejections, for the divergence watch
 
     def values(self, k: int, pose, W) -> gtsam.Values:
         v = gtsam.Values()
@@ -233,20 +231,6 @@ class _Graph:
                         self._hold(key[0], j)
         if held and not reject:
             del self.jump[key]                         # it came back: the jump is over
-        # The watch sees only what the gate lets through: an estimate walked
-        # away from its sensor would see every later measurement rejected, and
-        # nothing would say so (measured: 14 km off at sigma 3 m on 10 m fixes
-        # at 0.2 Hz). A run of rejections that is no held jump is a divergence,
-        # as the EKF's reacquire_after.
-        if not reject:
-            self.reject_run[key] = 0
-        elif not held:
-            run = self.reject_run[key] = self.reject_run.get(key, 0) + 1
-            if run >= REJECT_RUN:
-                what = "GPS fixes" if key[0] == "gps" else f"ranges to beacon {key[1]}"
-                self.lost = (f"the last {run} {what} were all rejected at first linearisation (far from the "
-                             "estimate and from the sensor's recent level)")
-                self.reject_run[key] = 0
 
     def _hold(self, sensor: str, i: int) -> None:
         """Fix or range i is held out of later linearisations (_drop_held). A
@@ -333,7 +317,7 @@ class _Graph:
         lp = gtsam.Values()
         lp.insert(W_KEY(k), W[k, W_IDX].copy())
         lp.insert(S_KEY(k), W[k, S_IDX].copy())
-        self.slip_at[k] = (self.wheel_slip(W[k]), W[k, 5:7].copy())
+        self.slip_at[k] = self.wheel_slip(W[k])
         return gtsam.LinearContainerFactor(jf, lp)
 
     def wheel_slip(self, w: np.ndarray) -> np.ndarray:
@@ -341,13 +325,15 @@ class _Graph:
         return w[5:7] / np.asarray(self.prob.speed_ref, float)[0:2] * w[3:5]
 
     def refresh_slip_priors(self, lo: int, hi: int, W, linear_index: dict, factors, remove: list) -> list[int]:
-        """Re-linearise the slip priors of intervals lo <= j < hi whose slip or
-        scale factors moved by more than the relinearisation thresholds ISAM2
-        gives them (_params: 0.2 c, 4e-3 x relinearize_threshold) since they
-        were linearised: the replacement goes into
+        """Re-linearise the slip priors of intervals lo <= j < hi whose slip, in
+        wheel-speed units, moved by more than the relinearisation threshold
+        ISAM2 gives slip (_params: 0.2 c) since they were linearised: the replacement goes into
         ``factors``, the old factor's index into ``remove``. Returns the
         intervals refreshed, in the order their factors were added. Older
         intervals are forgotten (their values are no longer read back)."""
+        kf = self.prob.kf
+        if hi > 0:      # at most REFRESH_BACK s back: with relinearize_after 0, lo stays at the segment start
+            lo = max(lo, int(np.searchsorted(kf.t, kf.t[hi] - REFRESH_BACK)))
         for j in [j for j in self.slip_at if j < lo]:
             del self.slip_at[j]
         c = self.options.slip_cauchy if self.options.slip_cauchy is not None else 0.05
@@ -355,9 +341,7 @@ class _Graph:
         for j in range(lo, hi):
             if j not in self.slip_at or j not in linear_index:
                 continue
-            u, sc = self.slip_at[j]
-            if (np.max(np.abs(self.wheel_slip(W[j]) - u)) > 0.2 * c
-                    or np.max(np.abs(W[j, 5:7] - sc)) > 4e-3 * self.options.relinearize_threshold):
+            if np.max(np.abs(self.wheel_slip(W[j]) - self.slip_at[j])) > 0.2 * c:
                 remove.append(linear_index[j][-1])
                 factors.add(self.slip_factor(j, W))
                 done.append(j)
@@ -547,15 +531,12 @@ class _Runner:
                                  held=held, update_times=self.update_times[1:], recoveries=list(self.recoveries),
                                  heading_until=self.heading_until, **extra)
 
-    def _watch(self, j: int) -> None:
+    def _watch(self, j: int) -> str | None:
         """Divergence watch on interval j's GPS fixes and ranges, at the estimate just
         updated with them. A linear factor keeps the linearisation it was given;
         if that was far off (nominal parameters wrong by 2x, say), the estimate
         can walk away from the data while every update looks normal. Post-fit
         residuals of a healthy smoother are at the noise level."""
-        if self.graph.lost is not None:
-            reason, self.graph.lost = self.graph.lost, None
-            return reason
         kf = self.prob.kf
         # Fixes and ranges the first-linearisation gate rejected say nothing about the estimate.
         gated = self.graph.gated_rows
@@ -646,9 +627,8 @@ def _joint_marginal(isam, k: int) -> np.ndarray:
 #: The first linearisation of a fix or range rejects it beyond this many sigma
 #: from the prediction and from the sensor's recent residuals (_Graph.first_gate).
 FIRST_GATE = 10.0
-#: First-linearisation rejections of one sensor in a row (no held jump) that
-#: count as a divergence (_Graph._gate, _Runner._watch): as EKFOptions.reacquire_after.
-REJECT_RUN = 5
+#: Look-back [s] of the slip priors' refresh (_Graph.refresh_slip_priors); fixed-lag: its window.
+REFRESH_BACK = 5.0
 #: An update that moves the newest keyframe from its prediction by more than this
 #: many sigmas of the absolute sensor (plus twice the path so far) overshot (_overshot).
 OVERSHOOT = 2.0 * FIRST_GATE
@@ -1084,6 +1064,10 @@ class FixedLagRunner(_Runner):
             Sig[np.ix_(S_COLS, S_COLS)] = self.smoother.marginalCovariance(S_KEY(k))
             self.Sig[k] = Sig
         self.done[k] = True
+        # Its factors leave with it: no index of them may be removed later (their slots are reused),
+        # and an unbounded stream keeps nothing per keyframe it no longer needs.
+        self.linear_index.pop(k, None)
+        self.graph.slip_at.pop(k, None)
 
     def _recovery_start(self, k: int, j: int) -> int:
         first = int(np.argmin(self.done[:k])) if not self.done[:k].all() else k
@@ -1153,8 +1137,9 @@ class FixedLagRunner(_Runner):
         # Slip priors of intervals still in the window whose slip moved (not
         # one this update marginalises: a factor on a marginalised key is gone).
         n_before = factors.size()
+        # The whole window, as ISAM2 re-weighs a built-in at any age: a slip that
+        # later fixes reveal must not keep the weight of zero slip (the output is final).
         lo = int(np.searchsorted(kf.t, kf.t[k] - self.options.lag + kf.dt[k - 1] - 1e-12))
-        lo = max(lo, self._relin_next)
         while lo < k - 1 and self.done[lo]:
             lo += 1
         fresh = self.graph.refresh_slip_priors(lo, k - 1, self.W, self.linear_index, factors, remove)
@@ -1166,8 +1151,8 @@ class FixedLagRunner(_Runner):
         for pos, i in enumerate(fresh):
             self.linear_index[i][-1] = idx[n_before + pos]
         est = self.smoother.calculateEstimate()
-        # Read back what the next re-linearisation needs, and the newest keyframes.
-        for i in range(min(self._relin_next, k - 1), k + 1):
+        # Read back the window: what the next re-linearisations (and slip prior refreshes) need.
+        for i in range(min(self._relin_next, lo, k - 1), k + 1):
             if not self.done[i]:
                 self._store(i, est)
 
