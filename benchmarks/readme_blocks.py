@@ -626,11 +626,15 @@ def _weak_long(d: dict) -> str:
     runs = sum(len(r[m]["flagged"]) for m in sm)
     stopped = sum(len(r[m]["stopped"]) for m in r)
     checks = [c["z"] for m in sm for c in r[m]["path_scale"] if c is not None]
-    return (f"  Still open: on a long log with very weak fixes ({lg['scenario']}, {lg['duration_s']:g} s, "
+    head = (f"on a long log with very weak fixes ({lg['scenario']}, {lg['duration_s']:g} s, "
             f"{lg['gps_sigma']:g} m GPS\n  at {lg['gps_hz']:g} Hz) the smoothers' common scale comes out "
-            f"{_rng(errs, '{:.1f}')} % off, up to\n  {max(zs):.1f} of their sigmas, and the check, which "
-            f"there is about as uncertain as\n  the error (z {_rng(checks, '{:.1f}')}), flagged {flagged} of "
-            f"{runs} runs; {stopped} run(s) stopped. Read scale factors from such\n  "
+            f"{_rng(errs, '{:.1f}')} % off, up to\n  {max(zs):.1f} of their sigmas")
+    tail = (f"the check (z {_rng(checks, '{:.1f}')}) flagged {flagged} of {runs} runs; {stopped} run(s) "
+            "stopped.")
+    if max(zs) < 3.0:
+        # 3.9-5.8 % at up to 4.5 sigma before the slip prior went into wheel-speed units
+        return (f"  Since the sparse slip prior is on scale × slip (`graph.slip_prior_rows`),\n  {head}; {tail}")
+    return (f"  Still open: {head}, and {tail} Read scale factors from such\n  "
             "logs as a few per cent at best.")
 
 
