@@ -744,8 +744,8 @@ class _Smoother:
             from odomgraph.estimators.heading import HeadingWatch
             rb = online.robot
             gps_first = prob.meas.gps is not None
-            self.lever = rb.gps_lever_arm if gps_first else rb.range_lever_arm
-            self.watch = HeadingWatch(rb.track_width, self.lever, float(np.median(prob.meas.gps[2])) if gps_first
+            lever = rb.gps_lever_arm if gps_first else rb.range_lever_arm
+            self.watch = HeadingWatch(rb.track_width, lever, float(np.median(prob.meas.gps[2])) if gps_first
                                       else rb.range_sigma, fixes=gps_first)
 
     def wheel_row(self, i: int, t: float) -> None:
@@ -805,7 +805,7 @@ class _Smoother:
         if final:
             r.trim()
             if self.watch is not None:
-                r.heading_until = self.watch.t_known      # the final smoothing's, from the whole stream
+                r.heading_watch = self.watch      # the final smoothing's, from the whole stream
             self.final = r.finish(self.wall0)
             online.final = self.final
         return out
@@ -838,7 +838,7 @@ class _Smoother:
         from odomgraph.estimators.heading import widen_rows
         sig = row.sigma[None].copy()
         pc = None if row.pose_cov is None else row.pose_cov[None].copy()
-        widen_rows(np.array([row.t]), sig, pc, until, self.lever)
+        widen_rows(np.array([row.t]), sig, pc, until, self.watch)
         return dc_replace(row, sigma=sig[0], pose_cov=None if pc is None else pc[0])
 
     def _online_row(self, k: int, online: Online) -> OnlineRow:

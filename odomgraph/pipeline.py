@@ -77,9 +77,10 @@ def _estimate_checked(log: Log, method: Method, schedule: Schedule, progress, op
     from odomgraph.analysis.mounting import dead_encoder_warnings
     from odomgraph.analysis.pathscale import path_scale_warnings
     from odomgraph.observability import few_beacons_warnings
-    from odomgraph.analysis.plausible import reversed_motion_warnings
+    from odomgraph.analysis.plausible import reversed_motion_warnings, skid_warnings
     suspect = (_prior_warnings(est, log) + mounting_warnings(log) + dead_encoder_warnings(log)
-               + reversed_motion_warnings(est, log.robot.track_width) + path_scale_warnings(est, log)
+               + reversed_motion_warnings(est, log.robot.track_width) + skid_warnings(est, log.robot.track_width)
+               + path_scale_warnings(est, log)
                + few_beacons_warnings(log))
     if log.gps is not None and not est.time_offsets:
         from odomgraph.analysis.timing import gps_offset_warnings

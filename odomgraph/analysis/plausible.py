@@ -49,3 +49,69 @@ def reversed_motion_warnings(est, track_width: float) -> list[str]:
                    "m/s): the heading is likely half a turn off there (the mirror solution of the slip model); "
                    "not trustworthy")
     return out
+
+
+#: A wheel turning slower than the ground under it passes (a skid) by more
+#: than this [m/s], by a median over the stretch of SKID_SIGMA of its own
+#: sigma...
+SKID_MIN = 0.03
+SKID_SIGMA = 1.0
+#: ...and by more than this share of the ground speed (a scale error that
+#: small is left to the other checks)...
+SKID_REL = 0.05
+#: ...for at least this long [s]. A driven wheel skids for a moment when it
+#: brakes; one that stays slower than the ground for seconds is what a
+#: calibration that took up slip looks like afterwards.
+SKID_DURATION = 5.0
+
+
+def skid_warnings(est, track_width: float) -> list[str]:
+    """One line per wheel that ``est`` (nominal track ``track_width`` [m]) has turning slower than the ground
+    under it passes (slip against the ground's direction: LOG_FORMAT's
+    error model, surface speed = ground speed + slip), beyond SKID_MIN,
+    SKID_SIGMA of the slip's sigma and SKID_REL of the ground speed, over
+    SKID_DURATION or more at once; [] when there is none.
+
+    Why it matters: a wheel that spun while the paper's schedule forced slip
+    to zero (eq. 35-36) leaves its scale factor too large by that slip's
+    share of the speed. Once the spinning stops, the only way the estimate
+    can explain the wheel is a slip of the opposite sign, held for as long
+    as the robot drives. A probe's log (the right wheel spinning 0.1 m/s from
+    3 to 80 s of a 100 s log, a 20 s window) ended with scale_right 9 %
+    off at 107 sigma, status ok; its slip then read -0.08 m/s for the last
+    20 s. A stall in the window is caught before the estimate
+    (estimators.slipcheck); a slip that fills the window looks normal there."""
+    t = est.t
+    if len(t) < 2:
+        return []
+    x, sig = est.mean, est.sigma
+    half = 0.5 * track_width * x[:, S.SCALE][:, 2]
+    v, w = x[:, S.V], x[:, S.OMEGA]
+    ground = np.stack([v - w * half, v + w * half], -1)
+    slip = x[:, S.SLIP]
+    against = -slip * np.sign(ground)                              # > 0: slower than the ground
+    thr = np.maximum(SKID_MIN, SKID_REL * np.abs(ground))
+    # over one-second means: a filter's rows jitter about the threshold
+    n = max(1, int(round(1.0 / max(float(np.median(np.diff(t))), 1e-9))))
+    mean = (lambda a: np.stack([np.convolve(a[:, j], np.ones(n) / n, "same") for j in (0, 1)], -1))
+    skid = (mean(against - thr) > 0) & (np.abs(ground) > MIN_SPEED)
+    out = []
+    for j, name in enumerate(("left", "right")):
+        edges = np.flatnonzero(np.diff(np.concatenate([[0], skid[:, j].astype(np.int8), [0]])))
+        for a, b in zip(edges[::2], edges[1::2]):
+            t0, t1 = float(t[a]), float(t[b - 1])
+            if t1 - t0 < SKID_DURATION:
+                continue
+            seg = slice(a, b)
+            # a filter's slip sigma is an instant's; held for seconds, a skid
+            # of one sigma is already far beyond what its random walk wanders
+            if np.median(against[seg, j]) <= SKID_SIGMA * np.median(sig[seg, S.SLIP][:, j]):
+                continue
+            share = float(np.median(against[seg, j] / np.abs(ground[seg, j])))
+            out.append(f"{est.method}: from t={t0:.1f} to {t1:.1f} s the {name} wheel turns {100 * share:.0f} % "
+                       f"slower than the ground under it passes (slip {float(np.median(slip[seg, j])):+.3f} m/s): "
+                       "a driven wheel does not skid that long; its scale factor is likely too large, having "
+                       "taken up slip inside the calibration window (or the scale factors are wrong); "
+                       "not trustworthy")
+            break                                                  # one line per wheel
+    return out

@@ -630,7 +630,7 @@ def run_batch(log: Log, schedule: Schedule = Schedule(), options: SmootherOption
 
 def smoother_estimate(prob: Problem, schedule: Schedule, pose: np.ndarray, W: np.ndarray, Sig: np.ndarray,
                       method: str, wall0: float, notes: list[str], warnings=(), held: dict | None = None,
-                      causal_lag: float | None = None, heading_until: float | None = None,
+                      causal_lag: float | None = None, heading_watch=None,
                       **extra) -> Estimate:
     """A smoother's Estimate, built in one go from its keyframe solution.
 
@@ -649,25 +649,26 @@ def smoother_estimate(prob: Problem, schedule: Schedule, pose: np.ndarray, W: np
     never does; with ``causal_lag`` [s] (a row has seen that far ahead:
     fixed-lag's window), the rows before the motion less that lag; an
     ``online`` (causal) estimate's, the rows before the motion.
-    ``heading_until``: that motion's time [s] when known already (a stream's)."""
+    ``heading_watch``: the HeadingWatch a stream fed (online.py), with that
+    motion's time and the circle at each row's time; else the log's."""
     from dataclasses import replace
     given = Sig[-1][np.ix_(S.SCALE, S.SCALE)].copy()
     Sig = honest_blocks(prob, Sig)
     rows = keyframe_rows(prob, pose, W, Sig, method)
     if prob.init is not None and prob.init.heading_unknown and prob.meas is not None:
         from odomgraph.estimators import heading
-        until = heading_until               # a stream's, from all its data (online.py); else the log's
-        if until is None:
-            until = heading.known_from(prob.meas, prob.robot)
-        lever = prob.robot.gps_lever_arm if prob.meas.gps is not None else prob.robot.range_lever_arm
+        watch = heading_watch               # a stream's, from all its data (online.py); else the log's
+        if watch is None:
+            watch = heading.watch_log(prob.meas, prob.robot)
+        until = watch.t_known
         if causal_lag is None:      # a smoother of the whole log: the heading from motion at any time
             mine = np.inf if until == np.inf else -np.inf
         else:
             mine = until - causal_lag
-        n = heading.widen_rows(rows.t, rows.sigma, rows.pose_cov, mine, lever)
+        n = heading.widen_rows(rows.t, rows.sigma, rows.pose_cov, mine, watch)
         if extra.get("online") is not None:
             o = extra["online"]
-            n += heading.widen_rows(o.t, o.sigma, o.pose_cov, until, lever)
+            n += heading.widen_rows(o.t, o.sigma, o.pose_cov, until, watch)
         if n:
             warnings = list(warnings) + [heading.warning(until, prob.meas.t_start)]
     rejected, downweighted = robust_counts(prob, pose, W)

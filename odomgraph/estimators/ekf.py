@@ -464,13 +464,13 @@ class EKF:
             R_k = np.eye(2) * sg * sg
             # a sensor held out after a jump gets no rescue from its recent innovations (the jump's)
             ref = None if key in jump else gate_reference(hist.setdefault(key, []))
-            nis_k = self._pose_update(z, h, H, R_k, gates[GPS], ref, self.robot.gps_lever_arm, hw)
+            nis_k = self._pose_update(z, h, H, R_k, gates[GPS], ref, hw)
         elif code == RANGE:
             h, H = ranging.beacon_range(x[0], x[1], x[2], aux[0], self.robot.range_lever_arm)   # eq. 12-16
             key = (RANGE, aux[1])
             R_k = self._R[RANGE]
             ref = None if key in jump else gate_reference(hist.setdefault(key, []))
-            nis_k = self._pose_update(z, h, H[:, :3], R_k, gates[RANGE], ref, self.robot.range_lever_arm, hw)
+            nis_k = self._pose_update(z, h, H[:, :3], R_k, gates[RANGE], ref, hw)
         else:
             h, H = velocity.body_velocity(x[3], x[4])                             # sec. VI-B
             key = (VEL, 0)
@@ -483,11 +483,12 @@ class EKF:
             self._watch(t, code, nis_k)
         return nis_k
 
-    def _pose_update(self, z, h, H, R, gate, ref, lever, watch) -> float:
+    def _pose_update(self, z, h, H, R, gate, ref, watch) -> float:
         """A fix's or range's update (eq. 8-9, 12-16). While ``watch`` says
         the heading is not known yet, the heading is considered, not
         estimated (its gain row zero), and the position covariance is kept at
-        least the lever-arm circle's (heading.circle_variance): relinearised
+        least the circle's the centre lies on (heading.circle_variance of
+        watch.arm(): the lever-arm circle standing still): relinearised
         at a heading that wanders with the noise, the fixes would otherwise
         build up heading information that a robot standing still never gives."""
         if watch is None:
@@ -504,7 +505,7 @@ class EKF:
         finally:
             self.consider_heading = False
         if nis >= 0:
-            floor = circle_variance(lever)
+            floor = float(circle_variance(watch.arm()))
             w, V = np.linalg.eigh(self.P[0:2, 0:2])
             if w.min() < floor:
                 self.P[0:2, 0:2] += (V * np.maximum(floor - w, 0.0)) @ V.T    # adds PSD: stays a covariance

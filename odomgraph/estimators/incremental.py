@@ -405,7 +405,7 @@ class _Runner:
             raise OdomgraphError(f"{self.method}: range biases and a robust velocity random walk are "
                                  "batch-smoother options")
         self.log, self.schedule, self.options = log, schedule, options
-        self.heading_until: float | None = None   # set by a stream (online.py): when its motion showed the heading
+        self.heading_watch = None    # set by a stream (online.py): its HeadingWatch (when the motion showed the heading)
         # _watch: per sensor [slow running mean, count, dof, the last few values]
         self._ema = {"GPS fixes": [2.0, 0, 2, []], "ranges": [1.0, 0, 1, []]}
         self._path = [0, 0.0, 0, 0.0]   # _overshot: keyframe, wheels' path to it [m], fixes seen, largest sigma [m]
@@ -529,7 +529,7 @@ class _Runner:
             extra["held_out"] = {"gps": self.prob.kf.gps_t[gi]}
         return smoother_estimate(self.prob, self.schedule, self.pose, self.W, Sig, self.method, wall0, notes,
                                  held=held, update_times=self.update_times[1:], recoveries=list(self.recoveries),
-                                 heading_until=self.heading_until, **extra)
+                                 heading_watch=self.heading_watch, **extra)
 
     def _watch(self, j: int) -> str | None:
         """Divergence watch on interval j's GPS fixes and ranges, at the estimate just
