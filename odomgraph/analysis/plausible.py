@@ -76,7 +76,8 @@ def skid_warnings(est, track_width: float) -> list[str]:
     to zero (eq. 35-36) leaves its scale factor too large by that slip's
     share of the speed. Once the spinning stops, the only way the estimate
     can explain the wheel is a slip of the opposite sign, held for as long
-    as the robot drives. A probe's log (the right wheel spinning 0.1 m/s from
+    as the robot drives: it never grips again. A wheel that drags for a
+    while and then grips again for SKID_DURATION is not taken for this. A probe's log (the right wheel spinning 0.1 m/s from
     3 to 80 s of a 100 s log, a 20 s window) ended with scale_right 9 %
     off at 107 sigma, status ok; its slip then read -0.08 m/s for the last
     20 s. A stall in the window is caught before the estimate
@@ -94,13 +95,24 @@ def skid_warnings(est, track_width: float) -> list[str]:
     # over one-second means: a filter's rows jitter about the threshold
     n = max(1, int(round(1.0 / max(float(np.median(np.diff(t))), 1e-9))))
     mean = (lambda a: np.stack([np.convolve(a[:, j], np.ones(n) / n, "same") for j in (0, 1)], -1))
-    skid = (mean(against - thr) > 0) & (np.abs(ground) > MIN_SPEED)
+    moving = np.abs(ground) > MIN_SPEED
+    skid = (mean(against - thr) > 0) & moving
+    # gripping again: |slip| within the threshold while moving
+    grip = (mean(np.abs(slip) - thr) < 0) & moving
     out = []
     for j, name in enumerate(("left", "right")):
         edges = np.flatnonzero(np.diff(np.concatenate([[0], skid[:, j].astype(np.int8), [0]])))
+        gedges = np.flatnonzero(np.diff(np.concatenate([[0], grip[:, j].astype(np.int8), [0]])))
+        grips = [(float(t[a]), float(t[b - 1])) for a, b in zip(gedges[::2], gedges[1::2])
+                 if t[b - 1] - t[a] >= SKID_DURATION]
         for a, b in zip(edges[::2], edges[1::2]):
             t0, t1 = float(t[a]), float(t[b - 1])
             if t1 - t0 < SKID_DURATION:
+                continue
+            # A wheel that drags for a while and then grips again (a brake, a
+            # rut: the simulator's yard has one) had its scale right; one
+            # whose scale took up slip never grips again while it drives.
+            if any(g0 >= t1 - 1.0 for g0, _ in grips):
                 continue
             seg = slice(a, b)
             # a filter's slip sigma is an instant's; held for seconds, a skid

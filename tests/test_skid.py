@@ -1,0 +1,100 @@
+"""A wheel that spun through the calibration window (analysis.plausible.skid_warnings).
+
+The paper's schedule forces slip to zero while calibrating (eq. 35-36). A
+slip that fills the window is no stall the window's own check can see
+(estimators.slipcheck fits the window's normal out of the window itself),
+and it goes into the scale factor: a hostile probe's log (right wheel
+spinning 0.1 m/s from 3 to 80 s of 100 s) came out with scale_right 107
+sigma off, status ok, in every estimator. Afterwards the wheel, once it
+grips, can only be explained as turning slower than the ground for as long
+as the robot drives. These logs (other wheels, slips, scenarios and seeds
+than the probe's) must each end right within sigma or flagged."""
+import numpy as np
+import pytest
+
+from odomgraph.estimators.schedule import Schedule
+from odomgraph.pipeline import estimate
+from odomgraph.result import status_of
+from odomgraph.sim.faults import Faults, inject
+from odomgraph.sim.scenarios import SlipEvent, paper, yard
+from odomgraph.state import SCALE
+
+CASES = {
+    "yard, left wheel 0.12 m/s from 2 to 70 s of 95 s, seed 41": (yard, SlipEvent("left", 2.0, 70.0, 0.12), 95.0, 41),
+    "paper, right wheel 0.08 m/s from 1 to 60 s of 85 s, seed 42": (paper, SlipEvent("right", 1.0, 60.0, 0.08), 85.0,
+                                                                     42),
+}
+
+
+#: Found by this test and not solved yet (README, Known limitations): the
+#: EKF's skid on the paper log stays inside its slip sigma; on the yard log
+#: isam2 and fixed-lag end 11-31 sigma off with no flag (the left wheel's
+#: slip went into the right wheel's scale and the track).
+OPEN = {("paper, right wheel 0.08 m/s from 1 to 60 s of 85 s, seed 42", "ekf"),
+        ("yard, left wheel 0.12 m/s from 2 to 70 s of 95 s, seed 41", "isam2"),
+        ("yard, left wheel 0.12 m/s from 2 to 70 s of 95 s, seed 41", "fixed-lag")}
+
+
+@pytest.mark.parametrize("case,method", [
+    pytest.param(c, m, marks=pytest.mark.xfail(reason="open: a slip through the window, not flagged", strict=False))
+    if (c, m) in OPEN else (c, m)
+    for c in CASES for m in ("ekf", "batch", "isam2", "fixed-lag")])
+def test_a_slip_through_the_window_is_right_or_flagged(case, method):
+    make, slip, duration, seed = CASES[case]
+    sc = make(duration).with_(slips=(slip,))
+    log = inject(sc, Faults(), seed)
+    est = estimate(log, method, Schedule(20.0))
+    z = (est.mean[-1, SCALE] - np.array(sc.scales)) / est.sigma[-1, SCALE]
+    status, why = status_of(est)
+    if np.abs(z).max() > 3.0:
+        assert status == "degraded", (z, est.warnings)
+        said = [w for w in est.warnings if f"the {slip.wheel} wheel turns" in w and "slower than the ground" in w]
+        assert said, est.warnings
+        t0 = float(said[0].split("from t=")[1].split(" ")[0])
+        assert t0 >= slip.end - 1.0            # the skid is after the slip ends, where the wheel grips again
+
+
+@pytest.mark.parametrize("make,seed", [(paper, 43), (yard, 44)])
+def test_a_clean_log_and_its_slip_events_are_not_taken_for_a_skid(make, seed):
+    """The scenarios' own slip events (0.3-0.5 m/s for 8-10 s, after the
+    window) and a clean calibration: no skid said, by any estimator."""
+    log = inject(make(90.0), Faults(), seed)
+    for method in ("ekf", "batch", "isam2", "fixed-lag"):
+        est = estimate(log, method, Schedule(20.0))
+        assert not [w for w in est.warnings if "slower than the ground" in w], (method, est.warnings)
+
+
+def test_the_skid_check_reads_the_wheels_direction_and_its_sigma():
+    """Unit check on a synthetic estimate: a wheel slower than the ground
+    backwards, to the end, is a skid too; a skid within one sigma, shorter
+    than SKID_DURATION, below SKID_REL of the speed, or followed by
+    SKID_DURATION of grip (a drag that ended), is not."""
+    from types import SimpleNamespace
+
+    from odomgraph.analysis.plausible import SKID_DURATION, skid_warnings
+    t = np.arange(0.0, 30.0, 0.05)
+    mean = np.zeros((t.size, 11))
+    mean[:, 8:11] = 1.0
+    mean[:, 3] = -1.0                                    # reversing at 1 m/s
+    sigma = np.full((t.size, 11), 0.01)
+    on = t >= 10.0
+    mean[on, 7] = +0.1                                   # right wheel's surface speed -0.9: slower than the ground
+    est = SimpleNamespace(t=t, mean=mean, sigma=sigma, method="m")
+    out = skid_warnings(est, 0.5)
+    assert len(out) == 1 and "the right wheel turns 10 % slower" in out[0], out
+    assert float(out[0].split("from t=")[1].split(" ")[0]) == pytest.approx(10.0, abs=0.6)
+    sigma[:, 7] = 0.2                                    # within its sigma
+    assert skid_warnings(est, 0.5) == []
+    sigma[:, 7] = 0.01
+    mean[on, 7] = 0.04                                   # 4 %: below SKID_REL
+    assert skid_warnings(est, 0.5) == []
+    mean[on, 7] = -0.1                                   # faster than the ground: slip, not a skid
+    assert skid_warnings(est, 0.5) == []
+    mean[:, 7] = 0.0
+    mean[(t >= 10.0) & (t < 10.0 + SKID_DURATION - 1.5), 7] = 0.1      # too short
+    assert skid_warnings(est, 0.5) == []
+    mean[:, 7] = 0.0
+    mean[(t >= 10.0) & (t < 10.0 + SKID_DURATION + 3.0), 7] = 0.1      # a drag, then grip to the end
+    assert skid_warnings(est, 0.5) == []
+    mean[t >= 10.0 + SKID_DURATION + 3.0 + SKID_DURATION - 1.0, 7] = 0.1   # grip too short to count
+    assert len(skid_warnings(est, 0.5)) == 1
