@@ -79,16 +79,25 @@ def _estimate_checked(log: Log, method: Method, schedule: Schedule, progress, op
     from odomgraph.observability import few_beacons_warnings
     from odomgraph.analysis.plausible import reversed_motion_warnings, skid_warnings
     suspect = (_prior_warnings(est, log) + mounting_warnings(log) + dead_encoder_warnings(log)
-               + reversed_motion_warnings(est, log.robot.track_width) + skid_warnings(est, log.robot.track_width)
+               + reversed_motion_warnings(est, log.robot.track_width)
+               + (skid_warnings(est, log.robot.track_width) if _has_reference(log) else [])
                + path_scale_warnings(est, log)
                + few_beacons_warnings(log))
     if log.gps is not None and not est.time_offsets:
         from odomgraph.analysis.timing import gps_offset_warnings
         suspect += gps_offset_warnings(log, est)
+    from odomgraph.analysis.gyrotiming import gyro_offset_warnings
+    suspect += gyro_offset_warnings(log)
     est.warnings += [w for w in suspect if w not in est.warnings] + _window_warnings(est, log, schedule)
     est.flags += suspect
     _note_motion_scales(est, log, motion)
     return est
+
+
+def _has_reference(log: Log) -> bool:
+    """The log has an absolute position or speed reference (GPS, ranges or a
+    velocity sensor), so the ground speed is not only the wheels' word."""
+    return any(x is not None and len(x.t) for x in (log.gps, log.ranges, log.velocity))
 
 
 def _with_range_offsets(est: Estimate, log: Log, method: Method, schedule: Schedule,
@@ -621,6 +630,12 @@ def _calibration_checks(log: Log, est: Estimate, k, sk, method: Method, schedule
         problems += [f"{w} (calibrate --time-offset estimates it)"
                      if w.startswith("GPS time stamps look") and "lever arm" not in w else w
                      for w in gps_offset_warnings(log, est)]
+    # So does a gyro clock off (every turn reads as slip), and an estimate no
+    # robot can have driven (analysis.plausible: a wheel that skids for good
+    # after slip went into its scale, or the mirror solution).
+    from odomgraph.analysis.gyrotiming import gyro_offset_warnings
+    problems += gyro_offset_warnings(log)
+    problems += [w for w in est.flags if w.endswith("not trustworthy") and w not in problems]
     unobs = est.unobservable()
     for name, v, s in zip(("scale_left", "scale_right", "scale_track"), k, sk):
         if abs(v - 1.0) > IMPLAUSIBLE:

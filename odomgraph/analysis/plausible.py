@@ -81,7 +81,12 @@ def skid_warnings(est, track_width: float) -> list[str]:
     3 to 80 s of a 100 s log, a 20 s window) ended with scale_right 9 %
     off at 107 sigma, status ok; its slip then read -0.08 m/s for the last
     20 s. A stall in the window is caught before the estimate
-    (estimators.slipcheck); a slip that fills the window looks normal there."""
+    (estimators.slipcheck); a slip that fills the window looks normal there.
+
+    Only for logs with an absolute position or speed reference: without one
+    the ground speed is the wheels' own (the common scale is not determined),
+    and a skid-steer robot's real sideways skid in turns (the Jackal bag)
+    reads as one wheel slower than the other."""
     t = est.t
     if len(t) < 2:
         return []
@@ -123,7 +128,7 @@ def skid_warnings(est, track_width: float) -> list[str]:
             out.append(f"{est.method}: from t={t0:.1f} to {t1:.1f} s the {name} wheel turns {100 * share:.0f} % "
                        f"slower than the ground under it passes (slip {float(np.median(slip[seg, j])):+.3f} m/s): "
                        "a driven wheel does not skid that long; its scale factor is likely too large, having "
-                       "taken up slip inside the calibration window (or the scale factors are wrong); "
+                       "taken up slip while the schedule held slip at zero (or the scale factors are wrong); "
                        "not trustworthy")
             break                                                  # one line per wheel
     return out

@@ -469,10 +469,22 @@ def _offset_lines(parts: list[Offset], j: JointFit | None = None, lever=(0.0, 0.
                    "before you set [gps] time_offset")
     if lever_off:
         return out                                     # a wrong lever arm bends the windows: no jump to look for
-    # A jump: the windows before and after a point disagree, and each side
-    # agrees with itself (windows that scatter everywhere say the wheels'
-    # path is off, from wrong parameters or a mounting mistake, not the clock).
-    # The window that holds the jump sees part of each clock: it may be left out.
+    found = jump(parts)
+    if found is not None:
+        t_at, a, b = found
+        out.append(f"the GPS clock seems to jump by {b.delta - a.delta:+.2f} s near t={t_at:.0f} s "
+                   f"(offsets {a.delta:+.2f} s before, {b.delta:+.2f} s after)")
+    return out
+
+
+def jump(parts: list[Offset]) -> tuple[float, Offset, Offset] | None:
+    """A clock that jumps: (the time [s] of the first window after it, the
+    offset before, the offset after: their t0, t1 span the windows each
+    side), or None. The windows before and after
+    a point disagree, and each side agrees with itself (windows that scatter
+    everywhere say the wheels' path is off, from wrong parameters or a
+    mounting mistake, not the clock). The window that holds the jump sees
+    part of each clock: it may be left out."""
     for k in range(2, len(parts) - 1):
         for gap in (0, 1):
             before, after = parts[:k], parts[k + gap:]
@@ -480,7 +492,5 @@ def _offset_lines(parts: list[Offset], j: JointFit | None = None, lever=(0.0, 0.
                 continue
             a, b = combine(before), combine(after)
             if abs(b.delta - a.delta) > max(N_SIGMA * np.hypot(a.sigma, b.sigma), MIN_OFFSET):
-                out.append(f"the GPS clock seems to jump by {b.delta - a.delta:+.2f} s near t={after[0].t0:.0f} s "
-                           f"(offsets {a.delta:+.2f} s before, {b.delta:+.2f} s after)")
-                return out
-    return out
+                return after[0].t0, a, b
+    return None

@@ -1,0 +1,51 @@
+"""The gyro's clock against the wheels (analysis.gyrotiming).
+
+A hostile probe found a gyro clock that jumped 0.5 s mid-log leaving a wheel
+scale 4 sigma off, status ok, and a gyro stamped 0.25 s late taken for a GPS
+clock jump. Only the GPS was timed before. Scenarios, seeds, offsets and
+jump times here are other than the probe's (paper seed 164, +0.5 s at 40 s;
++0.25 s throughout)."""
+import numpy as np
+import pytest
+
+from odomgraph.analysis.gyrotiming import window_offsets
+from odomgraph.analysis.timing import combine
+from odomgraph.estimators.schedule import Schedule
+from odomgraph.pipeline import estimate
+from odomgraph.result import status_of
+from odomgraph.sim.faults import Faults, inject
+from odomgraph.sim.scenarios import paper, yard
+
+
+@pytest.mark.parametrize("make,seed,late", [(paper, 61, 0.15), (yard, 62, -0.3), (yard, 63, 0.4)])
+def test_a_late_gyro_is_measured_and_flagged(make, seed, late):
+    log = inject(make(90.0), Faults(clock_jumps=(("gyro", -1.0, late),)), seed)
+    off = combine(window_offsets(log))
+    assert off is not None and abs(off.delta - late) < max(3.0 * off.sigma, 0.03), off
+    est = estimate(log, "batch", Schedule(20.0))
+    said = [w for w in est.warnings if w.startswith("gyro time stamps look")]
+    assert len(said) == 1, est.warnings
+    assert float(said[0].split("look ")[1].split(" s late")[0]) == pytest.approx(late, abs=0.03)
+    assert status_of(est)[0] == "degraded"
+
+
+@pytest.mark.parametrize("make,seed,at,size", [(paper, 64, 55.0, 0.3), (yard, 65, 35.0, -0.4)])
+def test_a_gyro_clock_that_jumps_is_found(make, seed, at, size):
+    log = inject(make(100.0), Faults(clock_jumps=(("gyro", at, size),)), seed)
+    est = estimate(log, "ekf", Schedule(20.0))
+    said = [w for w in est.warnings if w.startswith("the gyro clock seems to jump by")]
+    assert len(said) == 1, est.warnings
+    assert float(said[0].split("jump by ")[1].split(" s")[0]) == pytest.approx(size, abs=0.04)
+    a, b = (float(v) for v in said[0].split("between t=")[1].split(" s ")[0].split(" and "))
+    assert a - 10.0 <= at <= b                          # said between the windows either side
+    assert status_of(est)[0] == "degraded"
+
+
+@pytest.mark.parametrize("make,seed", [(paper, 66), (yard, 67), (paper, 68)])
+def test_an_honest_gyro_clock_says_nothing(make, seed):
+    log = inject(make(120.0), Faults(), seed)
+    parts = window_offsets(log)
+    assert len(parts) >= 4
+    assert abs(combine(parts).delta) < 0.03, [p.delta for p in parts]
+    est = estimate(log, "batch", Schedule(20.0))
+    assert not [w for w in est.warnings if "gyro clock" in w or "gyro time stamps" in w], est.warnings
