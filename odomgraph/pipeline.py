@@ -87,11 +87,40 @@ def _estimate_checked(log: Log, method: Method, schedule: Schedule, progress, op
         from odomgraph.analysis.timing import gps_offset_warnings
         suspect += gps_offset_warnings(log, est)
     from odomgraph.analysis.gyrotiming import gyro_offset_warnings
-    suspect += gyro_offset_warnings(log)
+    suspect += gyro_offset_warnings(log) + _gap_warnings(est, log, options)
     est.warnings += [w for w in suspect if w not in est.warnings] + _window_warnings(est, log, schedule)
     est.flags += suspect
     _note_motion_scales(est, log, motion)
     return est
+
+
+def _gap_warnings(est: Estimate, log: Log, options: dict) -> list[str]:
+    """Rows that cannot carry the unknown timing of slip inside a gap in the
+    GPS fixes (estimators.gaps; the whole-log smoothers' rows are widened
+    there instead): a filter's (the EKF's, isam2's online.csv) when the
+    first fix after the gap finds them far off, fixed-lag's when the gap
+    holds more slip than their sigma."""
+    if log.gps is None or not len(log.gps.t):
+        return []
+    from odomgraph.estimators import gaps
+    from odomgraph.estimators.measurements import dead_reckoning, from_log
+    meas = from_log(log)
+    if meas.gps is None or not gaps.gaps(meas.gps[0]):
+        return []
+    path = dead_reckoning(meas, log.robot.track_width, tuple(est.mean[-1, S.SCALE]))
+    lever = log.robot.gps_lever_arm
+    out = []
+    if est.method == "fixed-lag":
+        from odomgraph.estimators.incremental import IncrementalOptions
+        out += gaps.unwidened_gap_warnings(est.method, est.t, est.mean, est.sigma, meas.gps[0])
+        lag = float(options.get("lag", IncrementalOptions().lag))
+        out += gaps.gap_end_warnings(est.method, est.t, est.mean, est.pose_cov, meas.gps, lever, path, lag)
+    if est.method == "ekf":
+        out += gaps.gap_end_warnings(est.method, est.t, est.mean, est.pose_cov, meas.gps, lever, path)
+    if est.online is not None:
+        o = est.online
+        out += gaps.gap_end_warnings(f"{est.method} (online.csv)", o.t, o.mean, o.pose_cov, meas.gps, lever, path)
+    return out
 
 
 def _has_reference(log: Log) -> bool:

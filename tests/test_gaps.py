@@ -67,3 +67,42 @@ def test_the_widening_is_a_bridge():
         np.testing.assert_allclose(sigma[inside, i] ** 2, 1e-4 + 4.0 * f * (1.0 - f), atol=1e-12)
     assert np.all(pc[inside, 0, 1] == 0.0)
     assert np.all(sigma[~inside, 0:2] == 0.01) and np.all(pc[~inside, 0, 0] == 1e-4)
+
+
+@pytest.mark.parametrize("method", ["ekf", "fixed-lag"])
+@pytest.mark.parametrize("case", list(CASES))
+def test_causal_rows_inside_the_gap_are_covered_or_flagged(case, method):
+    """A filter's rows (and fixed-lag's, out before the gap ends) cannot be
+    widened after the fact: covered, or flagged by the first fix after it."""
+    from odomgraph.result import status_of
+    make, stall, (a, b), seed = CASES[case]
+    log = inject(make(90.0).with_(slips=()), Faults(stalls=(stall,), outages=(("gps", a, b),)), seed)
+    est = estimate(log, method, Schedule(20.0))
+    inside = (est.t > a) & (est.t < b)
+    ex = est.mean[inside, 0] - log.truth.at("x", est.t[inside])
+    ey = est.mean[inside, 1] - log.truth.at("y", est.t[inside])
+    z = np.maximum(np.abs(ex) / est.sigma[inside, 0], np.abs(ey) / est.sigma[inside, 1])
+    if z.max() > 5.0:
+        said = [w for w in est.warnings if "the first fix after a gap in the fixes lay far" in w
+                or ("slipped inside gaps in the fixes" in w and "not trustworthy there" in w)]
+        assert said and status_of(est)[0] == "degraded", (z.max(), est.warnings)
+
+
+def test_the_first_fix_after_a_gap_is_read_against_the_last_row_before_it():
+    """Unit check: rows at 10 Hz heading east, antenna 0.5 m ahead; fixes at
+    1 Hz with a 6 s gap. The fix after it 1 m north of the prediction is
+    flagged at a row sigma of 0.1 m (10 sigma), not at 0.5 m (2 sigma)."""
+    t = np.arange(0.0, 20.0, 0.1) + 0.05
+    mean = np.zeros((t.size, 11))
+    mean[:, 0] = t                                       # 1 m/s east
+    gt = np.concatenate([np.arange(0.0, 8.01, 1.0), np.arange(14.0, 20.0, 1.0)])
+    xy = np.stack([gt + 0.5, np.zeros_like(gt)], -1)
+    xy[gt == 14.0, 1] = 1.0
+    gps = (gt, xy, np.full(gt.size, 0.01))
+    path = (np.arange(0.0, 20.01, 0.05), np.stack([np.arange(0.0, 20.01, 0.05), np.zeros(401), np.zeros(401)], -1))
+    for s, flagged in ((0.1, True), (0.5, False)):
+        pc = np.tile(np.diag([s * s, s * s, 1e-6]), (t.size, 1, 1))
+        out = gaps.gap_end_warnings("m", t, mean, pc, gps, (0.5, 0.0), path)
+        assert bool(out) == flagged, (s, out)
+    assert "t=8.0-14.0 s: 1.00 m, 10.0 sigma" in gaps.gap_end_warnings(
+        "m", t, mean, np.tile(np.diag([0.01, 0.01, 1e-6]), (t.size, 1, 1)), gps, (0.5, 0.0), path)[0]

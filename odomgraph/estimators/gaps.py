@@ -56,12 +56,7 @@ def widen_gaps(t: np.ndarray, mean: np.ndarray, sigma: np.ndarray, pose_cov: np.
     docstring). Returns (start, end, distance [m]) of each gap widened."""
     out = []
     for a, b in gaps(fix_t):
-        sel = np.flatnonzero((t > a) & (t < b))
-        if sel.size < 2:
-            continue
-        s_cm = 0.5 * np.abs(mean[sel][:, S.SLIP].sum(1))            # common-mode slip [m/s]
-        edges = np.concatenate([[a], 0.5 * (t[sel][1:] + t[sel][:-1]), [b]])
-        dist = float(np.sum(s_cm * np.diff(edges)))
+        sel, dist = _slip_distance(t, mean, a, b)
         if dist < MIN_DISTANCE:
             continue
         f = (t[sel] - a) / (b - a)
@@ -85,4 +80,92 @@ def warning(found: list[tuple[float, float, float]], t0: float) -> list[str]:
         return []
     parts = ", ".join(f"t={a - t0:.1f}-{b - t0:.1f} s ({d:.2f} m)" for a, b, d in found)
     return [f"the wheels slipped inside gaps in the fixes ({parts}): when inside each gap is not known, so the "
-            "positions there carry up to that distance along the track in their sigma"]
+            "positions there carry up to that distance in their sigma"]
+
+
+def _slip_distance(t: np.ndarray, mean: np.ndarray, a: float, b: float) -> tuple[np.ndarray, float]:
+    """(indices of the rows inside the gap (a, b), the common-mode slip
+    distance [m] the rows put in it)."""
+    sel = np.flatnonzero((t > a) & (t < b))
+    if sel.size < 2:
+        return sel, 0.0
+    s_cm = 0.5 * np.abs(mean[sel][:, S.SLIP].sum(1))
+    edges = np.concatenate([[a], 0.5 * (t[sel][1:] + t[sel][:-1]), [b]])
+    return sel, float(np.sum(s_cm * np.diff(edges)))
+
+
+#: The first fix after a gap, against a causal row's prediction: beyond this
+#: squared Mahalanobis distance (chi-square, 2 dof, 1 - 1e-3) the rows in
+#: the gap understated their error.
+GAP_END_NIS = 13.8
+
+
+def gap_end_warnings(name: str, t: np.ndarray, mean: np.ndarray, pose_cov: np.ndarray | None, gps, lever,
+                     wheel_path, lag: float = 0.0) -> list[str]:
+    """For causal rows (the EKF's, isam2's online.csv; fixed-lag's with its
+    ``lag`` [s]) t (N,), mean (N, 11), pose_cov (N, 3, 3): one line when the
+    first GPS fix after a gap (``gps``: (t, xy (K, 2), sigma (K,)) as
+    cleaned) lies further than GAP_END_NIS allows from what the last row
+    that had not seen it predicts: that row (the last before the fix less
+    the lag) carried on to the fix along the wheels' own path (``wheel_path``:
+    measurements.dead_reckoning's times and poses), antenna at lever arm
+    ``lever`` [m]. Such rows cannot be widened after the fact (they were out
+    when the fix came): they are flagged. [] when none is."""
+    if gps is None or pose_cov is None or len(t) < 2:
+        return []
+    gt, xy, sg = gps
+    t_dr, P_dr = wheel_path
+    bad = []
+    for a, b in gaps(np.asarray(gt)):
+        i = int(np.searchsorted(t, b - lag, side="left")) - 1    # the last row that had not seen the fix
+        j = int(np.searchsorted(gt, b, side="left"))
+        if i < 0 or t[i] <= a or j >= len(gt):
+            continue
+        # that row carried on to the fix's time along the wheels' path (no slip: what it believed)
+        q0 = np.array([np.interp(t[i], t_dr, P_dr[:, k]) for k in range(3)])
+        q1 = np.array([np.interp(b, t_dr, P_dr[:, k]) for k in range(3)])
+        c0, s0 = np.cos(q0[2]), np.sin(q0[2])
+        dx, dy = q1[0] - q0[0], q1[1] - q0[1]
+        step = np.array([c0 * dx + s0 * dy, -s0 * dx + c0 * dy])      # in the wheels' frame at the row
+        ci, si = np.cos(mean[i, 2]), np.sin(mean[i, 2])
+        pos = mean[i, 0:2] + np.array([ci * step[0] - si * step[1], si * step[0] + ci * step[1]])
+        th = mean[i, 2] + q1[2] - q0[2]
+        c, s = np.cos(th), np.sin(th)
+        lx, ly = lever
+        ant = pos + np.array([c * lx - s * ly, s * lx + c * ly])
+        J = np.array([[1.0, 0.0, -s * lx - c * ly], [0.0, 1.0, c * lx - s * ly]])
+        Sm = J @ pose_cov[i] @ J.T + sg[j] ** 2 * np.eye(2)
+        d = xy[j] - ant
+        nis = float(d @ np.linalg.solve(Sm, d))
+        if nis > GAP_END_NIS:
+            bad.append((a, b, float(np.hypot(*d)), float(np.sqrt(nis))))
+    if not bad:
+        return []
+    parts = ", ".join(f"t={a:.1f}-{b:.1f} s: {d:.2f} m, {z:.1f} sigma" for a, b, d, z in bad)
+    return [f"{name}: the first fix after a gap in the fixes lay far from what its rows predicted ({parts}): the wheels "
+            "slipped (or drifted) where nothing could see it, and its rows inside the gap understate their error; "
+            "not trustworthy there"]
+
+
+def unwidened_gap_warnings(name: str, t: np.ndarray, mean: np.ndarray, sigma: np.ndarray, fix_t: np.ndarray
+                           ) -> list[str]:
+    """For fixed-lag's rows (out one lag after their time: those before the
+    gap's end less the lag had not seen the fix after it, the others were
+    smoothed over only part of the gap): one line when a gap holds slip
+    whose unknown timing (widen_gaps' bridge) exceeds 3 of the rows' own
+    sigma somewhere in it. [] when none does."""
+    bad = []
+    for a, b in gaps(fix_t):
+        sel, dist = _slip_distance(t, mean, a, b)
+        if dist < MIN_DISTANCE:
+            continue
+        f = (t[sel] - a) / (b - a)
+        bridge = dist * np.sqrt(f * (1.0 - f))
+        if np.any(bridge > 3.0 * np.maximum(sigma[sel, 0], sigma[sel, 1])):
+            bad.append((a, b, dist))
+    if not bad:
+        return []
+    parts = ", ".join(f"t={a:.1f}-{b:.1f} s ({d:.2f} m)" for a, b, d in bad)
+    return [f"{name}: the wheels slipped inside gaps in the fixes ({parts}); when inside each gap is not known, and "
+            "its rows there (out before the gap ended, or smoothed over only part of it) do not carry that in "
+            "their sigma; not trustworthy there (--method batch widens them)"]
