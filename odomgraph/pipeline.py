@@ -5,6 +5,7 @@
 """
 from __future__ import annotations
 
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -58,7 +59,7 @@ def _estimate_checked(log: Log, method: Method, schedule: Schedule, progress, op
         from odomgraph.analysis.noise import motion_scales, widened_motion
         motion = motion_scales(log)
         log = widened_motion(log, motion)
-    try:
+    def run(schedule: Schedule, options: dict) -> tuple[Estimate, dict]:
         est = _estimate_once(log, method, schedule, progress, options)
         _check_physical(est)
         est, options, offsets_note = _with_range_offsets(est, log, method, schedule, options)
@@ -66,12 +67,34 @@ def _estimate_checked(log: Log, method: Method, schedule: Schedule, progress, op
             est = _with_noise_scales(est, log, method, schedule, options)
         _check_physical(est)
         est.warnings += offsets_note
+        return est, options
+
+    retried = None
+    try:
+        try:
+            est, options = run(schedule, options)
+        except EstimatorDivergedError as exc:
+            # A wheel that slipped all through the calibration window leaves
+            # scale factors the later fixes contradict, and an incremental
+            # smoother cannot undo its window's zero-slip priors (a probe's
+            # yard log: isam2 and fixed-lag stopped 2 s after a 20 s window
+            # that a 0.12 m/s slip filled). Without the window the slip is
+            # estimated throughout; the run is flagged either way.
+            if method not in (Method.isam2, Method.fixed_lag) or not schedule.calibrate_until:
+                raise
+            retried = (f"{exc}; run again with slip estimated throughout (no calibration window): "
+                       "the wheels likely slipped inside the window, which the schedule takes as slip-free")
+            schedule = replace(schedule, calibrate_until=None)
+            est, options = run(schedule, options)
     except EstimatorDivergedError as exc:
         # A mounting mistake is the likeliest cause, and the data can name it.
         found = mounting_warnings(log)
         if found:
             raise EstimatorDivergedError(f"{exc}; the log shows why: {'; '.join(found)}") from exc
         raise
+    if retried is not None:
+        est.warnings.insert(0, retried)
+        est.flags.append(retried)
     from odomgraph.estimators.measurements import repeat_notes, saturation_notes
     est.warnings += [w for w in repeat_notes(log) + saturation_notes(log) if w not in est.warnings]
     from odomgraph.analysis.mounting import dead_encoder_warnings

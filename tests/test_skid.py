@@ -27,12 +27,9 @@ CASES = {
 
 
 #: Found by this test and not solved yet (README, Known limitations): the
-#: EKF's skid on the paper log stays inside its slip sigma; on the yard log
-#: isam2 and fixed-lag end 11-31 sigma off with no flag (the left wheel's
-#: slip went into the right wheel's scale and the track).
-OPEN = {("paper, right wheel 0.08 m/s from 1 to 60 s of 85 s, seed 42", "ekf"),
-        ("yard, left wheel 0.12 m/s from 2 to 70 s of 95 s, seed 41", "isam2"),
-        ("yard, left wheel 0.12 m/s from 2 to 70 s of 95 s, seed 41", "fixed-lag")}
+#: EKF's skid on the paper log stays inside its slip sigma (0.03-0.06 m/s
+#: at sigma 0.043), so it is not told from the filter's own wander.
+OPEN = {("paper, right wheel 0.08 m/s from 1 to 60 s of 85 s, seed 42", "ekf")}
 
 
 @pytest.mark.parametrize("case,method", [
@@ -98,3 +95,18 @@ def test_the_skid_check_reads_the_wheels_direction_and_its_sigma():
     assert skid_warnings(est, 0.5) == []
     mean[t >= 10.0 + SKID_DURATION + 3.0 + SKID_DURATION - 1.0, 7] = 0.1   # grip too short to count
     assert len(skid_warnings(est, 0.5)) == 1
+
+
+def test_a_smoother_that_diverges_after_its_window_runs_again_without_it():
+    """The yard case above stopped isam2 and fixed-lag 2 s after the window
+    (the fixes 12-13 sigma off and a 60 s re-solve could not bring them
+    back: the window's zero-slip priors cannot be undone). They now run
+    again with slip estimated throughout, say so, and are flagged."""
+    make, slip, duration, seed = CASES["yard, left wheel 0.12 m/s from 2 to 70 s of 95 s, seed 41"]
+    log = inject(make(duration).with_(slips=(slip,)), Faults(), seed)
+    for method in ("isam2", "fixed-lag"):
+        est = estimate(log, method, Schedule(20.0))
+        said = [w for w in est.warnings if "run again with slip estimated throughout" in w]
+        assert len(said) == 1 and said[0].startswith(f"{method} diverged at t="), est.warnings
+        assert status_of(est)[0] == "degraded"
+        assert est.t_switch is None                       # the run that finished had no window

@@ -128,7 +128,7 @@ def skid_warnings(est, track_width: float) -> list[str]:
             out.append(f"{est.method}: from t={t0:.1f} to {t1:.1f} s the {name} wheel turns {100 * share:.0f} % "
                        f"slower than the ground under it passes (slip {float(np.median(slip[seg, j])):+.3f} m/s): "
                        "a driven wheel does not skid that long; its scale factor is likely too large, having "
-                       "taken up slip while the schedule held slip at zero (or the scale factors are wrong); "
-                       "not trustworthy")
+                       "taken up slip (held at zero while calibrating, or taken for rare by the slip prior), or "
+                       "the scale factors are wrong; not trustworthy")
             break                                                  # one line per wheel
     return out
