@@ -135,7 +135,8 @@ def _gap_warnings(est: Estimate, log: Log, options: dict) -> list[str]:
     out = []
     if est.method == "fixed-lag":
         from odomgraph.estimators.incremental import IncrementalOptions
-        out += gaps.unwidened_gap_warnings(est.method, est.t, est.mean, est.sigma, meas.gps[0])
+        out += gaps.unwidened_gap_warnings(est.method, est.t, est.mean, est.sigma, meas.gps[0],
+                                           gaps.min_distance(meas, log.robot))
         lag = float(options.get("lag", IncrementalOptions().lag))
         out += gaps.gap_end_warnings(est.method, est.t, est.mean, est.pose_cov, meas.gps, lever, path, lag)
     if est.method == "ekf":

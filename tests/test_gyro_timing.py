@@ -49,3 +49,18 @@ def test_an_honest_gyro_clock_says_nothing(make, seed):
     assert abs(combine(parts).delta) < 0.03, [p.delta for p in parts]
     est = estimate(log, "batch", Schedule(20.0))
     assert not [w for w in est.warnings if "gyro clock" in w or "gyro time stamps" in w], est.warnings
+
+
+def test_brief_slips_at_every_turn_are_not_a_late_clock():
+    """A second probe's false alarm: a wheel that slips 0.15 m/s for 0.5 s at
+    the start of each of 22 turns shifts the windows by 0.06 s, which read
+    as a late gyro; no clock was off (MIN_OFFSET 0.1 s)."""
+    from odomgraph.sim.scenarios import Segment, SlipEvent
+    turns = (Segment(3.0, 0.8, 0.0), Segment(3.0, 0.5, 0.8), Segment(3.0, 0.8, 0.0), Segment(3.0, 0.5, -0.8))
+    slips = tuple(SlipEvent("right" if k % 2 == 0 else "left", 23.0 + 6 * k, 23.5 + 6 * k, 0.15) for k in range(22))
+    sc = paper(150.0).with_(loop=turns, slips=slips)
+    log = inject(sc, Faults(), 321)
+    parts = window_offsets(log)
+    assert parts and abs(combine(parts).delta) < 0.1
+    est = estimate(log, "batch", Schedule(20.0))
+    assert not [w for w in est.warnings if "gyro clock" in w or "gyro time stamps" in w], est.warnings

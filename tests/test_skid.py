@@ -110,3 +110,19 @@ def test_a_smoother_that_diverges_after_its_window_runs_again_without_it():
         assert len(said) == 1 and said[0].startswith(f"{method} diverged at t="), est.warnings
         assert status_of(est)[0] == "degraded"
         assert est.t_switch is None                       # the run that finished had no window
+
+
+@pytest.mark.parametrize("make,seed,duration,drag", [
+    (yard, 291, 130.0, None),                                       # yard's own 118-126 s drag, 4 s before the end
+    (paper, 241, 120.0, SlipEvent("left", 110.0, 118.0, -0.2)),
+    (paper, 242, 121.0, SlipEvent("right", 112.0, 119.5, -0.15))])
+def test_a_drag_near_the_end_of_the_log_is_not_a_skid(make, seed, duration, drag):
+    """A second probe's false alarms: a real drag that ends a few seconds
+    before the log does left no room for SKID_DURATION of grip after it, and
+    was taken for a wheel that never grips again (the scale factors were
+    exact)."""
+    sc = make(duration) if drag is None else make(duration).with_(slips=(drag,))
+    log = inject(sc, Faults(), seed)
+    for method in ("ekf", "batch"):
+        est = estimate(log, method, Schedule(20.0))
+        assert not [w for w in est.warnings if "slower than the ground" in w], (method, est.warnings)

@@ -77,7 +77,9 @@ def skid_warnings(est, track_width: float) -> list[str]:
     share of the speed. Once the spinning stops, the only way the estimate
     can explain the wheel is a slip of the opposite sign, held for as long
     as the robot drives: it never grips again. A wheel that drags for a
-    while and then grips again for SKID_DURATION is not taken for this. A probe's log (the right wheel spinning 0.1 m/s from
+    while and then grips again for SKID_DURATION, or to the end of the log's
+    motion, is not taken for this (yard's own 8 s drag, in a log that ends
+    4 s after it, was). A probe's log (the right wheel spinning 0.1 m/s from
     3 to 80 s of a 100 s log, a 20 s window) ended with scale_right 9 %
     off at 107 sigma, status ok; its slip then read -0.08 m/s for the last
     20 s. A stall in the window is caught before the estimate
@@ -108,8 +110,8 @@ def skid_warnings(est, track_width: float) -> list[str]:
     for j, name in enumerate(("left", "right")):
         edges = np.flatnonzero(np.diff(np.concatenate([[0], skid[:, j].astype(np.int8), [0]])))
         gedges = np.flatnonzero(np.diff(np.concatenate([[0], grip[:, j].astype(np.int8), [0]])))
-        grips = [(float(t[a]), float(t[b - 1])) for a, b in zip(gedges[::2], gedges[1::2])
-                 if t[b - 1] - t[a] >= SKID_DURATION]
+        t_last = float(t[np.flatnonzero(moving[:, j])[-1]]) if moving[:, j].any() else float(t[-1])
+        grips = [(float(t[a]), float(t[b - 1])) for a, b in zip(gedges[::2], gedges[1::2])]
         for a, b in zip(edges[::2], edges[1::2]):
             t0, t1 = float(t[a]), float(t[b - 1])
             if t1 - t0 < SKID_DURATION:
@@ -117,7 +119,10 @@ def skid_warnings(est, track_width: float) -> list[str]:
             # A wheel that drags for a while and then grips again (a brake, a
             # rut: the simulator's yard has one) had its scale right; one
             # whose scale took up slip never grips again while it drives.
-            if any(g0 >= t1 - 1.0 for g0, _ in grips):
+            # (or grips from the skid's end to the last moving row: a log that
+            # ends soon after a drag has no room for SKID_DURATION of grip)
+            if any(g0 >= t1 - 1.0 and (g1 - g0 >= SKID_DURATION or (g0 <= t1 + 1.0 and g1 >= t_last - 0.5))
+                   for g0, g1 in grips):
                 continue
             seg = slice(a, b)
             # a filter's slip sigma is an instant's; held for seconds, a skid

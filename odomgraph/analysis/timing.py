@@ -477,7 +477,7 @@ def _offset_lines(parts: list[Offset], j: JointFit | None = None, lever=(0.0, 0.
     return out
 
 
-def jump(parts: list[Offset]) -> tuple[float, Offset, Offset] | None:
+def jump(parts: list[Offset], min_offset: float = MIN_OFFSET) -> tuple[float, Offset, Offset] | None:
     """A clock that jumps: (the time [s] of the first window after it, the
     offset before, the offset after: their t0, t1 span the windows each
     side), or None. The windows before and after
@@ -491,6 +491,6 @@ def jump(parts: list[Offset]) -> tuple[float, Offset, Offset] | None:
             if len(after) < 2 or not (_consistent(before) and _consistent(after)):
                 continue
             a, b = combine(before), combine(after)
-            if abs(b.delta - a.delta) > max(N_SIGMA * np.hypot(a.sigma, b.sigma), MIN_OFFSET):
+            if abs(b.delta - a.delta) > max(N_SIGMA * np.hypot(a.sigma, b.sigma), min_offset):
                 return after[0].t0, a, b
     return None

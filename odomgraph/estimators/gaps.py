@@ -27,8 +27,18 @@ from odomgraph import state as S
 #: A gap is at least this long [s] and GAP_INTERVALS median fix intervals...
 MIN_GAP = 2.0
 GAP_INTERVALS = 3.0
-#: ...and the slip distance in it at least this [m] to count.
-MIN_DISTANCE = 0.05
+#: ...and the slip distance in it at least this [m], and FIX_SIGMAS of the
+#: fixes' sigma, to count: less, the fix after the gap cannot have shown it
+#: (a slip that ended just before an outage leaks a few centimetres into it).
+MIN_DISTANCE = 0.1
+FIX_SIGMAS = 3.0
+
+
+def min_distance(meas, robot) -> float:
+    """The slip distance [m] a gap must hold to count (MIN_DISTANCE,
+    FIX_SIGMAS): GPS fixes' median sigma, else the ranges'."""
+    sig = float(np.median(meas.gps[2])) if meas.gps is not None and len(meas.gps[0]) else float(robot.range_sigma)
+    return max(MIN_DISTANCE, FIX_SIGMAS * sig)
 
 
 def fix_times(meas) -> np.ndarray:
@@ -49,18 +59,23 @@ def gaps(fix_t: np.ndarray) -> list[tuple[float, float]]:
 
 
 def widen_gaps(t: np.ndarray, mean: np.ndarray, sigma: np.ndarray, pose_cov: np.ndarray | None,
-               fix_t: np.ndarray) -> list[tuple[float, float, float]]:
+               fix_t: np.ndarray, least: float = MIN_DISTANCE) -> list[tuple[float, float, float, bool]]:
     """Rows t (N,) [s], mean and sigma (N, 11), pose_cov (N, 3, 3) or None,
     widened in place (x and y) inside each gap of ``fix_t`` where
-    the estimate's common-mode slip covers MIN_DISTANCE or more (module
-    docstring). Returns (start, end, distance [m]) of each gap widened."""
+    the estimate's common-mode slip covers ``least`` [m] or more (module
+    docstring). Returns (start, end, distance [m], whether the widening
+    exceeds the rows' own sigma somewhere) of each gap widened."""
     out = []
     for a, b in gaps(fix_t):
         sel, dist = _slip_distance(t, mean, a, b)
-        if dist < MIN_DISTANCE:
+        if dist < least:
             continue
         f = (t[sel] - a) / (b - a)
         var = dist ** 2 * f * (1.0 - f)
+        # said only where it matters: the bridge's middle beyond the rows' own
+        # sigma there (a slip that ended just before an outage leaks a few cm
+        # into it)
+        matters = bool(0.5 * dist > float(np.median(np.minimum(sigma[sel, 0], sigma[sel, 1]))))
         # In x and y alike, not only along the heading: where the path
         # curves, slip moved to another time moves the row along another
         # direction (yard, a stall in a curve: 0.14 m across the track at a
@@ -70,15 +85,17 @@ def widen_gaps(t: np.ndarray, mean: np.ndarray, sigma: np.ndarray, pose_cov: np.
         if pose_cov is not None:
             pose_cov[sel, 0, 0] += var
             pose_cov[sel, 1, 1] += var
-        out.append((a, b, dist))
+        out.append((a, b, dist, matters))
     return out
 
 
-def warning(found: list[tuple[float, float, float]], t0: float) -> list[str]:
-    """The one line saying which gaps were widened, or []."""
+def warning(found: list[tuple[float, float, float, bool]], t0: float) -> list[str]:
+    """The one line saying which gaps were widened beyond their rows' own
+    sigma, or []."""
+    found = [g for g in found if g[3]]
     if not found:
         return []
-    parts = ", ".join(f"t={a - t0:.1f}-{b - t0:.1f} s ({d:.2f} m)" for a, b, d in found)
+    parts = ", ".join(f"t={a - t0:.1f}-{b - t0:.1f} s ({d:.2f} m)" for a, b, d, _ in found)
     return [f"the wheels slipped inside gaps in the fixes ({parts}): when inside each gap is not known, so the "
             "positions there carry up to that distance in their sigma"]
 
@@ -147,8 +164,8 @@ def gap_end_warnings(name: str, t: np.ndarray, mean: np.ndarray, pose_cov: np.nd
             "not trustworthy there"]
 
 
-def unwidened_gap_warnings(name: str, t: np.ndarray, mean: np.ndarray, sigma: np.ndarray, fix_t: np.ndarray
-                           ) -> list[str]:
+def unwidened_gap_warnings(name: str, t: np.ndarray, mean: np.ndarray, sigma: np.ndarray, fix_t: np.ndarray,
+                           least: float = MIN_DISTANCE) -> list[str]:
     """For fixed-lag's rows (out one lag after their time: those before the
     gap's end less the lag had not seen the fix after it, the others were
     smoothed over only part of the gap): one line when a gap holds slip
@@ -157,7 +174,7 @@ def unwidened_gap_warnings(name: str, t: np.ndarray, mean: np.ndarray, sigma: np
     bad = []
     for a, b in gaps(fix_t):
         sel, dist = _slip_distance(t, mean, a, b)
-        if dist < MIN_DISTANCE:
+        if dist < least:
             continue
         f = (t[sel] - a) / (b - a)
         bridge = dist * np.sqrt(f * (1.0 - f))
