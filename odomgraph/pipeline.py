@@ -82,8 +82,9 @@ def _estimate_checked(log: Log, method: Method, schedule: Schedule, progress, op
             # estimated throughout; the run is flagged either way.
             if method not in (Method.isam2, Method.fixed_lag) or not schedule.calibrate_until:
                 raise
-            retried = (f"{exc}; run again with slip estimated throughout (no calibration window): "
-                       "the wheels likely slipped inside the window, which the schedule takes as slip-free")
+            retried = (f"{exc}; run again with slip estimated throughout (no calibration window): if the "
+                       "wheels slipped inside the window, which the schedule takes as slip-free, the scale "
+                       "factors it gave were wrong; not trustworthy")
             schedule = replace(schedule, calibrate_until=None)
             est, options = run(schedule, options)
     except EstimatorDivergedError as exc:
@@ -119,14 +120,17 @@ def _estimate_checked(log: Log, method: Method, schedule: Schedule, progress, op
 
 def _gap_warnings(est: Estimate, log: Log, options: dict) -> list[str]:
     """Rows that cannot carry the unknown timing of slip inside a gap in the
-    GPS fixes (estimators.gaps; the whole-log smoothers' rows are widened
-    there instead): a filter's (the EKF's, isam2's online.csv) when the
+    GPS fixes (estimators.gaps; GPS only: a range fixes no point to read a
+    prediction against; the whole-log smoothers' rows are widened there
+    instead): a filter's (the EKF's, isam2's online.csv) when the
     first fix after the gap finds them far off, fixed-lag's when the gap
     holds more slip than their sigma."""
     if log.gps is None or not len(log.gps.t):
         return []
     from odomgraph.estimators import gaps
     from odomgraph.estimators.measurements import dead_reckoning, from_log
+    if est.method == "batch":
+        return []
     meas = from_log(log)
     if meas.gps is None or not gaps.gaps(meas.gps[0]):
         return []
@@ -136,14 +140,16 @@ def _gap_warnings(est: Estimate, log: Log, options: dict) -> list[str]:
     if est.method == "fixed-lag":
         from odomgraph.estimators.incremental import IncrementalOptions
         out += gaps.unwidened_gap_warnings(est.method, est.t, est.mean, est.sigma, meas.gps[0],
-                                           gaps.min_distance(meas, log.robot))
+                                           gaps.min_distance(meas.gps[2], log.robot))
         lag = float(options.get("lag", IncrementalOptions().lag))
         out += gaps.gap_end_warnings(est.method, est.t, est.mean, est.pose_cov, meas.gps, lever, path, lag)
-    if est.method == "ekf":
+    if est.method.startswith("ekf"):
         out += gaps.gap_end_warnings(est.method, est.t, est.mean, est.pose_cov, meas.gps, lever, path)
     if est.online is not None:
+        # isam2's causal rows carry no pose covariance: their sigmas, uncorrelated
         o = est.online
-        out += gaps.gap_end_warnings(f"{est.method} (online.csv)", o.t, o.mean, o.pose_cov, meas.gps, lever, path)
+        pc = o.pose_cov if o.pose_cov is not None else np.stack([np.diag(v) for v in o.sigma[:, 0:3] ** 2])
+        out += gaps.gap_end_warnings(f"{est.method} (online.csv)", o.t, o.mean, pc, meas.gps, lever, path)
     return out
 
 

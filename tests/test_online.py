@@ -309,6 +309,10 @@ def test_bad_values_are_refused_with_a_reason():
 SMOOTHER_LOGS = {
     "paper seed 13": lambda: simulate(paper(60), 13),
     "yard, stall (recoveries)": lambda: inject(yard(80), Faults(stalls=(Stall(30.0, 40.0),)), 14),
+    # a stall inside a GPS outage long after the warm-up: the final smoothing widens the gap
+    # (estimators.gaps) from the grown keyframes, as the replay does
+    "paper, stall inside an outage": lambda: inject(paper(90.0).with_(slips=()), Faults(
+        stalls=(Stall(40.0, 47.0, 0.6, 0.6),), outages=(("gps", 36.0, 52.0),)), 71),
     # past isam2's 300 s segment: a hand-over inside the stream
     "yard 330 s, gyro 100 Hz": lambda: simulate(_rated(yard(330), gyro=100.0), 15),
 }

@@ -126,3 +126,17 @@ def test_a_drag_near_the_end_of_the_log_is_not_a_skid(make, seed, duration, drag
     for method in ("ekf", "batch"):
         est = estimate(log, method, Schedule(20.0))
         assert not [w for w in est.warnings if "slower than the ground" in w], (method, est.warnings)
+
+
+def test_an_estimate_shorter_than_a_second_is_read():
+    """A review found the one-second means broke on fewer rows than a
+    second holds (a 0.8 s log raised in every estimator)."""
+    from types import SimpleNamespace
+
+    from odomgraph.analysis.plausible import skid_warnings
+    t = np.arange(0.0, 0.25, 0.05)
+    mean = np.zeros((t.size, 11))
+    mean[:, 8:11] = 1.0
+    mean[:, 3] = 1.0
+    est = SimpleNamespace(t=t, mean=mean, sigma=np.full((t.size, 11), 0.01), method="m")
+    assert skid_warnings(est, 0.5) == []

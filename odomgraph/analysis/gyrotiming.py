@@ -121,14 +121,17 @@ def gyro_offset_warnings(log) -> list[str]:
     parts = window_offsets(log)
     whole = combine(parts)
     out = []
-    if whole is not None and abs(whole.delta) > max(N_SIGMA * whole.sigma, MIN_OFFSET) and len(parts) >= 2:
+    found = jump(parts, MIN_OFFSET)
+    # a jump's two clocks average to an offset no clock had: only the jump is said then
+    if (found is None and whole is not None and abs(whole.delta) > max(N_SIGMA * whole.sigma, MIN_OFFSET)
+            and len(parts) >= 2):
         out.append(f"gyro time stamps look {whole.delta:+.2f} s late (sigma {whole.sigma:.2f} s) against the wheels: "
                    "every turn then looks like slip, and the scale factors bend to explain it; re-stamp gyro.csv "
                    "(t less the offset)")
-    found = jump(parts, MIN_OFFSET)
     if found is not None:
         _, a, b = found
-        out.append(f"the gyro clock seems to jump by {b.delta - a.delta:+.2f} s between t={a.t1:.0f} and "
+        # the last window before may hold the jump itself
+        out.append(f"the gyro clock seems to jump by {b.delta - a.delta:+.2f} s between t={a.t1 - WINDOW:.0f} and "
                    f"{b.t0 + WINDOW:.0f} s (offsets {a.delta:+.2f} s before, {b.delta:+.2f} s after) against the "
                    "wheels: the scale factors bend to explain it")
     return out

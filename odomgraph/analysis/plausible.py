@@ -100,7 +100,7 @@ def skid_warnings(est, track_width: float) -> list[str]:
     against = -slip * np.sign(ground)                              # > 0: slower than the ground
     thr = np.maximum(SKID_MIN, SKID_REL * np.abs(ground))
     # over one-second means: a filter's rows jitter about the threshold
-    n = max(1, int(round(1.0 / max(float(np.median(np.diff(t))), 1e-9))))
+    n = min(len(t), max(1, int(round(1.0 / max(float(np.median(np.diff(t))), 1e-9)))))   # (a log under 1 s)
     mean = (lambda a: np.stack([np.convolve(a[:, j], np.ones(n) / n, "same") for j in (0, 1)], -1))
     moving = np.abs(ground) > MIN_SPEED
     skid = (mean(against - thr) > 0) & moving

@@ -671,12 +671,12 @@ def smoother_estimate(prob: Problem, schedule: Schedule, pose: np.ndarray, W: np
             n += heading.widen_rows(o.t, o.sigma, o.pose_cov, until, watch)
         if n:
             warnings = list(warnings) + [heading.warning(until, prob.meas.t_start)]
-    if causal_lag is None and prob.meas is not None:
+    if causal_lag is None:
         # a whole-log smoother: where in a gap the wheels slipped is not known (estimators.gaps)
         from odomgraph.estimators import gaps
-        found = gaps.widen_gaps(rows.t, rows.mean, rows.sigma, rows.pose_cov, gaps.fix_times(prob.meas),
-                                gaps.min_distance(prob.meas, prob.robot))
-        warnings = list(warnings) + gaps.warning(found, prob.meas.t_start)
+        found = gaps.widen_gaps(rows.t, rows.mean, rows.sigma, rows.pose_cov, gaps.fix_times(prob.kf),
+                                gaps.min_distance(prob.kf.gps_sigma, prob.robot))
+        warnings = list(warnings) + gaps.warning(found)
     rejected, downweighted = robust_counts(prob, pose, W)
     for k, v in list((prob.spikes or {}).items()) + list((held or {}).items()):   # added to the robust loss's
         rejected[k] = rejected.get(k, 0) + v

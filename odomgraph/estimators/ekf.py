@@ -403,7 +403,7 @@ class EKF:
             gps_first = m.gps is not None
             self.heading_watch = HeadingWatch(r.track_width, r.gps_lever_arm if gps_first else r.range_lever_arm,
                                               float(np.median(m.gps[2])) if gps_first else r.range_sigma,
-                                              fixes=gps_first)
+                                              fixes=gps_first, record=False)
             self._t_wheel = None
 
     def row(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -464,13 +464,13 @@ class EKF:
             R_k = np.eye(2) * sg * sg
             # a sensor held out after a jump gets no rescue from its recent innovations (the jump's)
             ref = None if key in jump else gate_reference(hist.setdefault(key, []))
-            nis_k = self._pose_update(z, h, H, R_k, gates[GPS], ref, hw)
+            nis_k = self._pose_update(z, h, H, R_k, gates[GPS], ref, self.robot.gps_lever_arm, hw)
         elif code == RANGE:
             h, H = ranging.beacon_range(x[0], x[1], x[2], aux[0], self.robot.range_lever_arm)   # eq. 12-16
             key = (RANGE, aux[1])
             R_k = self._R[RANGE]
             ref = None if key in jump else gate_reference(hist.setdefault(key, []))
-            nis_k = self._pose_update(z, h, H[:, :3], R_k, gates[RANGE], ref, hw)
+            nis_k = self._pose_update(z, h, H[:, :3], R_k, gates[RANGE], ref, self.robot.range_lever_arm, hw)
         else:
             h, H = velocity.body_velocity(x[3], x[4])                             # sec. VI-B
             key = (VEL, 0)
@@ -483,7 +483,7 @@ class EKF:
             self._watch(t, code, nis_k)
         return nis_k
 
-    def _pose_update(self, z, h, H, R, gate, ref, watch) -> float:
+    def _pose_update(self, z, h, H, R, gate, ref, lever, watch) -> float:
         """A fix's or range's update (eq. 8-9, 12-16). While ``watch`` says
         the heading is not known yet, the heading is considered, not
         estimated (its gain row zero), and the position covariance is kept at
@@ -505,7 +505,8 @@ class EKF:
         finally:
             self.consider_heading = False
         if nis >= 0:
-            floor = float(circle_variance(watch.arm()))
+            # at least this sensor's own lever-arm circle (the watch's is the GPS's in a log with both)
+            floor = float(circle_variance(max(watch.arm(), float(np.hypot(*lever)))))
             w, V = np.linalg.eigh(self.P[0:2, 0:2])
             if w.min() < floor:
                 self.P[0:2, 0:2] += (V * np.maximum(floor - w, 0.0)) @ V.T    # adds PSD: stays a covariance

@@ -34,17 +34,25 @@ MIN_DISTANCE = 0.1
 FIX_SIGMAS = 3.0
 
 
-def min_distance(meas, robot) -> float:
+def min_distance(fix_sigma, robot) -> float:
     """The slip distance [m] a gap must hold to count (MIN_DISTANCE,
-    FIX_SIGMAS): GPS fixes' median sigma, else the ranges'."""
-    sig = float(np.median(meas.gps[2])) if meas.gps is not None and len(meas.gps[0]) else float(robot.range_sigma)
+    FIX_SIGMAS): the GPS fixes' median sigma (``fix_sigma`` (G,) [m]), else
+    the ranges'."""
+    sig = float(np.median(fix_sigma)) if fix_sigma is not None and len(fix_sigma) else float(robot.range_sigma)
     return max(MIN_DISTANCE, FIX_SIGMAS * sig)
 
 
-def fix_times(meas) -> np.ndarray:
-    """Sorted times [s] of the absolute fixes (GPS and ranges) in
-    ``meas`` (estimators.measurements.Measurements); empty without any."""
-    ts = [m[0] for m in (meas.gps, meas.ranges) if m is not None and len(m[0])]
+def fix_times(kf) -> np.ndarray:
+    """Sorted times [s] of the absolute fixes in the keyframe problem ``kf``
+    (estimators.keyframes.Keyframes: GPS fixes at their times, ranges at
+    their interval's start); empty without any. From the keyframes, not the
+    measurements: a stream's problem grows its keyframes, and its
+    measurements hold only the warm-up."""
+    ts = []
+    if kf.gps_t is not None and len(kf.gps_t):
+        ts.append(np.asarray(kf.gps_t, float))
+    if len(kf.rng_k):
+        ts.append(np.asarray(kf.t)[np.asarray(kf.rng_k, int)])
     return np.unique(np.concatenate(ts)) if ts else np.zeros(0)
 
 
@@ -63,8 +71,9 @@ def widen_gaps(t: np.ndarray, mean: np.ndarray, sigma: np.ndarray, pose_cov: np.
     """Rows t (N,) [s], mean and sigma (N, 11), pose_cov (N, 3, 3) or None,
     widened in place (x and y) inside each gap of ``fix_t`` where
     the estimate's common-mode slip covers ``least`` [m] or more (module
-    docstring). Returns (start, end, distance [m], whether the widening
-    exceeds the rows' own sigma somewhere) of each gap widened."""
+    docstring). Returns (start, end, distance [m], whether the bridge's
+    middle, D/2, exceeds the rows' median sigma in the gap) of each gap
+    widened.""" 
     out = []
     for a, b in gaps(fix_t):
         sel, dist = _slip_distance(t, mean, a, b)
@@ -89,13 +98,13 @@ def widen_gaps(t: np.ndarray, mean: np.ndarray, sigma: np.ndarray, pose_cov: np.
     return out
 
 
-def warning(found: list[tuple[float, float, float, bool]], t0: float) -> list[str]:
+def warning(found: list[tuple[float, float, float, bool]]) -> list[str]:
     """The one line saying which gaps were widened beyond their rows' own
     sigma, or []."""
     found = [g for g in found if g[3]]
     if not found:
         return []
-    parts = ", ".join(f"t={a - t0:.1f}-{b - t0:.1f} s ({d:.2f} m)" for a, b, d, _ in found)
+    parts = ", ".join(f"t={a:.1f}-{b:.1f} s ({d:.2f} m)" for a, b, d, _ in found)
     return [f"the wheels slipped inside gaps in the fixes ({parts}): when inside each gap is not known, so the "
             "positions there carry up to that distance in their sigma"]
 
@@ -150,7 +159,9 @@ def gap_end_warnings(name: str, t: np.ndarray, mean: np.ndarray, pose_cov: np.nd
         c, s = np.cos(th), np.sin(th)
         lx, ly = lever
         ant = pos + np.array([c * lx - s * ly, s * lx + c * ly])
-        J = np.array([[1.0, 0.0, -s * lx - c * ly], [0.0, 1.0, c * lx - s * ly]])
+        # the row's heading turns both the step carried on and the lever arm
+        J = np.array([[1.0, 0.0, -si * step[0] - ci * step[1] - s * lx - c * ly],
+                      [0.0, 1.0, ci * step[0] - si * step[1] + c * lx - s * ly]])
         Sm = J @ pose_cov[i] @ J.T + sg[j] ** 2 * np.eye(2)
         d = xy[j] - ant
         nis = float(d @ np.linalg.solve(Sm, d))

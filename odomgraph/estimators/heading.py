@@ -34,6 +34,7 @@ sigma 0.6 m.
 """
 from __future__ import annotations
 
+import bisect
 import math
 from collections import deque
 
@@ -73,7 +74,7 @@ class HeadingWatch:
     measurements fix no point) the wheels alone decide.
     """
 
-    def __init__(self, track: float, lever, fix_sigma: float, fixes: bool = True):
+    def __init__(self, track: float, lever, fix_sigma: float, fixes: bool = True, record: bool = True):
         self.track = float(track)
         self.lever = np.asarray(lever, float)
         self.thr = motion_threshold(fix_sigma)
@@ -86,9 +87,18 @@ class HeadingWatch:
         self.t_known = math.inf
         # the dead-reckoned antenna summed over the fixes so far, and how many
         self._a_sum, self._n_fix = np.zeros(2), 0
-        # arm(): its value from each event on, until the heading is known
+        # arm(): its value from each event on where it moved (arm_at), until the
+        # heading is known; a filter that reads only arm() now records nothing
+        self._record_on = bool(record)
         self._hist_t: list[float] = []
         self._hist_arm: list[float] = []
+
+    def __setstate__(self, state: dict) -> None:
+        # a checkpoint written before the circle (odomgraph.online) has none of it
+        self.__dict__.update(state)
+        for name, value in (("_a_sum", np.zeros(2)), ("_n_fix", 0), ("_record_on", True), ("_hist_t", []),
+                            ("_hist_arm", [])):
+            self.__dict__.setdefault(name, value)
 
     @property
     def known(self) -> bool:
@@ -116,17 +126,27 @@ class HeadingWatch:
     def arm_at(self, t) -> np.ndarray:
         """``arm()`` as it was at times t (N,) [s] (the last event at or
         before each; |l| before the first); after the heading is known, its
-        last value."""
+        last value. One time (a stream's row) is a bisection of the history,
+        not a copy of it."""
         t = np.atleast_1d(np.asarray(t, float))
+        lever = float(np.hypot(*self.lever))
+        if t.size == 1:
+            i = bisect.bisect_right(self._hist_t, float(t[0])) - 1
+            return np.array([self._hist_arm[i] if i >= 0 else lever])
         if not self._hist_t:
-            return np.full(t.shape, float(np.hypot(*self.lever)))
+            return np.full(t.shape, lever)
         i = np.searchsorted(np.asarray(self._hist_t), t, side="right") - 1
-        vals = np.concatenate([[float(np.hypot(*self.lever))], self._hist_arm])
+        vals = np.concatenate([[lever], self._hist_arm])
         return vals[i + 1]
 
     def _record(self, t: float) -> None:
+        if not self._record_on:
+            return
+        a = self.arm()
+        if self._hist_arm and abs(a - self._hist_arm[-1]) < 1e-3:
+            return                        # standing still: the history stays one entry, not one per event
         self._hist_t.append(float(t))
-        self._hist_arm.append(self.arm())
+        self._hist_arm.append(a)
 
     def wheel(self, t: float, v_left: float, v_right: float, dt: float) -> None:
         if self.known:
