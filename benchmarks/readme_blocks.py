@@ -599,6 +599,10 @@ def weak_online(results: Path) -> str:
     stopped = len(o["rows"]) - len(rows)
     cov = [100.0 * r["coverage"] for r in rows]
     bad = [r for r in rows if r["coverage"] < 0.95]
+    if not rows:
+        return ("- **isam2's causal estimate on extremely weak fixes.** With "
+                f"{o['gps_sigma']:g} m GPS at {o['gps_hz']:g} Hz and no `[initial]` every run of seeds "
+                f"{seeds[0]}–{seeds[-1]} stopped.\n\n  " + _source("weak_gps", d))
     return ("- **isam2's causal estimate on extremely weak fixes.** With "
             f"{o['gps_sigma']:g} m GPS at {o['gps_hz']:g} Hz and no\n  `[initial]` "
             f"({o['scenario']}, {o['duration_s']:g} s, the noise fit off, seeds {seeds[0]}–{seeds[-1]}) the heading "
