@@ -616,8 +616,7 @@ def weak_online(results: Path) -> str:
             f"{len(bad)} of {len(rows)} runs\n  below 95 %), the largest errors "
             f"{_rng([r['max_error_m'] for r in rows], '{:.0f}')} m at up to "
             f"{max(r['max_z'] for r in rows):.0f}σ; {stopped} stopped: the overshoots the\n"
-            "  watch misses are still far outside σ. The smoothed `states.csv` and batch\n"
-            "  are right on them.\n\n  " + _source("weak_gps", d))
+            "  watch misses are still far outside σ.\n\n  " + _source("weak_gps", d))
 
 
 def _weak_whole(d: dict) -> str:
