@@ -692,8 +692,9 @@ def _calibration_checks(log: Log, est: Estimate, k, sk, method: Method, schedule
     # So does a gyro clock off (every turn reads as slip), and an estimate no
     # robot can have driven (analysis.plausible: a wheel that skids for good
     # after slip went into its scale, or the mirror solution).
-    from odomgraph.analysis.gyrotiming import gyro_offset_warnings
-    problems += gyro_offset_warnings(log)
+    # (estimate fitted the gyro's clock already: its lines are in the flags)
+    from odomgraph.analysis.gyrotiming import SAID
+    problems += [w for w in est.flags if w.startswith(SAID) and w not in problems]
     problems += [w for w in est.flags if w.endswith("not trustworthy") and w not in problems]
     unobs = est.unobservable()
     for name, v, s in zip(("scale_left", "scale_right", "scale_track"), k, sk):

@@ -64,3 +64,15 @@ def test_brief_slips_at_every_turn_are_not_a_late_clock():
     assert parts and abs(combine(parts).delta) < 0.1
     est = estimate(log, "batch", Schedule(20.0))
     assert not [w for w in est.warnings if "gyro clock" in w or "gyro time stamps" in w], est.warnings
+
+
+def test_calibrate_refuses_a_late_gyro():
+    """calibrate reads the clock's line back from the estimate's flags (it
+    does not fit the clock again) and will not write: paper seed 69, the
+    gyro 0.3 s late throughout."""
+    from odomgraph.pipeline import calibrate
+    log = inject(paper(90.0), Faults(clock_jumps=(("gyro", -1.0, 0.3),)), 69)
+    _, rep = calibrate(log, tune=False)
+    said = [w for w in rep["problems"] if w.startswith("gyro time stamps look")]
+    assert len(said) == 1, rep["problems"]
+    assert float(said[0].split("look ")[1].split(" s late")[0]) == pytest.approx(0.3, abs=0.03)

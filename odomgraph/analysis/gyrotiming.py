@@ -77,6 +77,7 @@ def window_offsets(log) -> list[Offset]:
     noise2 = r.gyro_sigma ** 2 + om_sig2
     wheel_hz = 1.0 / max(float(np.median(np.diff(w.t))), 1e-6)
     lo, hi = w.t[0] + TRIALS[-1], w.t[-1] + TRIALS[0]               # every shift stays inside the wheels' span
+    dom = np.gradient(om, w.t)                                      # the wheels' yaw acceleration [rad/s^2]
     out = []
     for a in np.arange(max(gt[0], lo), min(gt[-1], hi) - WINDOW + 1e-9, WINDOW):
         sel = (gt >= a) & (gt < a + WINDOW)
@@ -102,7 +103,6 @@ def window_offsets(log) -> list[Offset]:
         # is the factor times the wheels' yaw acceleration; the samples count
         # at most at the wheels' rate (the gyro's extra samples see the same
         # interpolated wheel rate).
-        dom = np.gradient(om, w.t)
         slope = fits[i][1] * np.interp(tg - delta, w.t, dom)
         n_eff = min(1.0, (WINDOW * wheel_hz) / len(tg))
         info = n_eff * float(np.sum(slope ** 2)) / max(cost[i], noise2)
@@ -115,6 +115,11 @@ def window_offsets(log) -> list[Offset]:
     return out
 
 
+#: How gyro_offset_warnings' lines begin (calibrate reads them back from
+#: an estimate's flags rather than fitting the clock again).
+SAID = ("gyro time stamps look", "the gyro clock seems to jump by")
+
+
 def gyro_offset_warnings(log) -> list[str]:
     """One line for a gyro clock that is off against the wheels over the
     log, and one for a clock that jumps; [] when neither shows."""
@@ -125,13 +130,13 @@ def gyro_offset_warnings(log) -> list[str]:
     # a jump's two clocks average to an offset no clock had: only the jump is said then
     if (found is None and whole is not None and abs(whole.delta) > max(N_SIGMA * whole.sigma, MIN_OFFSET)
             and len(parts) >= 2):
-        out.append(f"gyro time stamps look {whole.delta:+.2f} s late (sigma {whole.sigma:.2f} s) against the wheels: "
+        out.append(f"{SAID[0]} {whole.delta:+.2f} s late (sigma {whole.sigma:.2f} s) against the wheels: "
                    "every turn then looks like slip, and the scale factors bend to explain it; re-stamp gyro.csv "
                    "(t less the offset)")
     if found is not None:
         _, a, b = found
         # the last window before may hold the jump itself
-        out.append(f"the gyro clock seems to jump by {b.delta - a.delta:+.2f} s between t={a.t1 - WINDOW:.0f} and "
+        out.append(f"{SAID[1]} {b.delta - a.delta:+.2f} s between t={a.t1 - WINDOW:.0f} and "
                    f"{b.t0 + WINDOW:.0f} s (offsets {a.delta:+.2f} s before, {b.delta:+.2f} s after) against the "
                    "wheels: the scale factors bend to explain it")
     return out

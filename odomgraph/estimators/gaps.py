@@ -73,13 +73,9 @@ def widen_gaps(t: np.ndarray, mean: np.ndarray, sigma: np.ndarray, pose_cov: np.
     the estimate's common-mode slip covers ``least`` [m] or more (module
     docstring). Returns (start, end, distance [m], whether the bridge's
     middle, D/2, exceeds the rows' median sigma in the gap) of each gap
-    widened.""" 
+    widened."""
     out = []
-    for a, b in gaps(fix_t):
-        sel, dist = _slip_distance(t, mean, a, b)
-        if dist < least:
-            continue
-        f = (t[sel] - a) / (b - a)
+    for a, b, sel, dist, f in _slipped_gaps(t, mean, fix_t, least):
         var = dist ** 2 * f * (1.0 - f)
         # said only where it matters: the bridge's middle beyond the rows' own
         # sigma there (a slip that ended just before an outage leaks a few cm
@@ -107,6 +103,16 @@ def warning(found: list[tuple[float, float, float, bool]]) -> list[str]:
     parts = ", ".join(f"t={a:.1f}-{b:.1f} s ({d:.2f} m)" for a, b, d, _ in found)
     return [f"the wheels slipped inside gaps in the fixes ({parts}): when inside each gap is not known, so the "
             "positions there carry up to that distance in their sigma"]
+
+
+def _slipped_gaps(t: np.ndarray, mean: np.ndarray, fix_t: np.ndarray, least: float):
+    """Each gap of ``fix_t`` whose rows put ``least`` [m] or more of
+    common-mode slip in it: (start, end [s], indices of its rows, the slip
+    distance [m], each row's fraction f of the way through the gap)."""
+    for a, b in gaps(fix_t):
+        sel, dist = _slip_distance(t, mean, a, b)
+        if dist >= least:
+            yield a, b, sel, dist, (t[sel] - a) / (b - a)
 
 
 def _slip_distance(t: np.ndarray, mean: np.ndarray, a: float, b: float) -> tuple[np.ndarray, float]:
@@ -183,11 +189,7 @@ def unwidened_gap_warnings(name: str, t: np.ndarray, mean: np.ndarray, sigma: np
     whose unknown timing (widen_gaps' bridge) exceeds 3 of the rows' own
     sigma somewhere in it. [] when none does."""
     bad = []
-    for a, b in gaps(fix_t):
-        sel, dist = _slip_distance(t, mean, a, b)
-        if dist < least:
-            continue
-        f = (t[sel] - a) / (b - a)
+    for a, b, sel, dist, f in _slipped_gaps(t, mean, fix_t, least):
         bridge = dist * np.sqrt(f * (1.0 - f))
         if np.any(bridge > 3.0 * np.maximum(sigma[sel, 0], sigma[sel, 1])):
             bad.append((a, b, dist))
