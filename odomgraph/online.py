@@ -65,7 +65,7 @@ from odomgraph.estimators.schedule import Schedule
 from odomgraph.estimators.sensors import DOF, SENSOR_NAMES, WHEEL, event_stream
 from odomgraph.estimators.slipcheck import in_stretches
 from odomgraph.io.csvtable import ORIGIN_ABOVE, ORIGIN_BELOW, split_stamps
-from odomgraph.io.log import Encoders, Gps, Gyro, Log, Ranges, Velocity, WheelSpeeds
+from odomgraph.io.log import SENSOR_FILE, SENSOR_FILES, Gps, Log, Ranges
 from odomgraph.io.stream import SENSOR_COLUMNS
 from odomgraph.io.robot import RobotConfig
 
@@ -334,7 +334,8 @@ class Online:
         names = SENSOR_COLUMNS.get(sensor)
         if names is None:
             raise StreamInputError(f"unknown sensor {sensor!r}; one of {', '.join(SENSOR_COLUMNS)}")
-        want = (2, 3) if sensor == "gps" else (len(names),)
+        sf = SENSOR_FILE[sensor]
+        want = tuple(range(len(sf.required), len(names) + 1))     # its optional columns may be left out
         if len(values) not in want:
             raise StreamInputError(f"{sensor}: expected {' or '.join(map(str, want))} values "
                                    f"({', '.join(names[:max(want)])}), got {len(values)}")
@@ -409,22 +410,19 @@ class Online:
                 return None
             return np.array([r[0] for r in rows]), [np.array(c) for c in zip(*(r[1] for r in rows))]
         kw = {}
-        if (a := arrays("encoders")) is not None:
-            kw["encoders"] = Encoders(a[0], *a[1])
-        if (a := arrays("wheel_speeds")) is not None:
-            kw["wheel_speeds"] = WheelSpeeds(a[0], *a[1])
-        if (a := arrays("gps")) is not None:
-            rows = self._raw["gps"][bisect.bisect_left(self._raw["gps"], (t_lo,)):]
-            # fixes with and without a sigma: the configured one for those without (LOG_FORMAT)
-            sig = (None if all(len(r[1]) == 2 for r in rows)
-                   else np.array([r[1][2] if len(r[1]) == 3 else self.robot.gps_sigma for r in rows]))
-            kw["gps"] = Gps(a[0], a[1][0], a[1][1], sig)
-        if (a := arrays("gyro")) is not None:
-            kw["gyro"] = Gyro(a[0], a[1][0])
-        if (a := arrays("ranges")) is not None:
-            kw["ranges"] = Ranges(a[0], a[1][0].astype(int), a[1][1])
-        if (a := arrays("velocity")) is not None:
-            kw["velocity"] = Velocity(a[0], *a[1])
+        for sf in SENSOR_FILES:
+            if (a := arrays(sf.name)) is None:
+                continue
+            if sf.name == "gps":
+                rows = self._raw["gps"][bisect.bisect_left(self._raw["gps"], (t_lo,)):]
+                # fixes with and without a sigma: the configured one for those without (LOG_FORMAT)
+                sig = (None if all(len(r[1]) == 2 for r in rows)
+                       else np.array([r[1][2] if len(r[1]) == 3 else self.robot.gps_sigma for r in rows]))
+                kw["gps"] = Gps(a[0], a[1][0], a[1][1], sig)
+            elif sf.name == "ranges":
+                kw["ranges"] = Ranges(a[0], a[1][0].astype(int), a[1][1])     # beacon indices
+            else:
+                kw[sf.name] = sf.cls(a[0], *a[1])
         return Log(self.robot, **kw)
 
     def _final_before(self, ahead: int = AHEAD_ROWS) -> float:

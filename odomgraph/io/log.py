@@ -68,6 +68,52 @@ class Velocity:
     omega: np.ndarray
 
 
+@dataclass(frozen=True)
+class SensorFile:
+    """One sensor's file of LOG_FORMAT.md. ``SENSOR_FILES`` is the one table
+    that reading and writing a log, the stream's line format (io.stream) and
+    the live estimator's buffers (odomgraph.online) read: a sensor whose
+    columns are plain numbers needs its dataclass and a line there, nothing
+    more, to be read, written and streamed."""
+    name: str
+    """The Log field, the file's stem and a stream line's first word."""
+    cls: type
+    """Its dataclass: ``t``, then ``columns`` in order."""
+    columns: tuple[str, ...]
+    """The columns after ``t``, in LOG_FORMAT order; the last ``optional`` of them may be absent."""
+    formats: tuple[str | None, ...]
+    """write_table's format of each column (None: text)."""
+    tie: int
+    """Rank among measurements of equal stamps when a stream merges the files:
+    the wheels, then the gyro, then the fixes, as estimators.sensors orders
+    its codes."""
+    optional: int = 0
+    min_rows: tuple[int, str] = (0, "")
+    """Fewest rows a file may hold, and why (said when it holds fewer)."""
+
+    @property
+    def file(self) -> str:
+        return f"{self.name}.csv"
+
+    @property
+    def required(self) -> tuple[str, ...]:
+        return self.columns[:len(self.columns) - self.optional]
+
+
+#: Every sensor file, in the Log's field order (the wheels first: they set the clock's origin).
+SENSOR_FILES = (
+    SensorFile("encoders", Encoders, ("ticks_left", "ticks_right"), ("%.0f", "%.0f"), 0,
+               min_rows=(2, " (the first only starts the count)")),
+    SensorFile("wheel_speeds", WheelSpeeds, ("v_left", "v_right"), ("%.6f", "%.6f"), 1, min_rows=(2, "")),
+    SensorFile("gps", Gps, ("x", "y", "sigma"), ("%.5f", "%.5f", "%.5f"), 3, optional=1),
+    SensorFile("gyro", Gyro, ("omega",), ("%.7f",), 2),
+    SensorFile("ranges", Ranges, ("beacon", "range"), (None, "%.5f"), 4),
+    SensorFile("velocity", Velocity, ("v", "omega"), ("%.6f", "%.6f"), 5),
+)
+#: The sensors by name.
+SENSOR_FILE = {s.name: s for s in SENSOR_FILES}
+
+
 #: truth.csv columns: the LOG_FORMAT ones plus ``gyro_bias`` (an allowed extra, written by the simulator).
 TRUTH_COLUMNS = ("x", "y", "theta", "v", "omega", "slip_left", "slip_right", "gyro_bias")
 
@@ -122,8 +168,7 @@ class Log:
         return float(max(s.t[-1] for s in self.sensors() if len(s.t)))
 
     def sensors(self):
-        return [s for s in (self.encoders, self.wheel_speeds, self.gps, self.gyro, self.ranges, self.velocity)
-                if s is not None]
+        return [s for s in (getattr(self, f.name) for f in SENSOR_FILES) if s is not None]
 
     def with_(self, **changes) -> "Log":
         return replace(self, **changes)
@@ -138,8 +183,7 @@ class Log:
             if isinstance(obj, Truth):
                 kw["values"] = {k: v[keep] for k, v in obj.values.items()}
             return type(obj)(**kw)
-        return replace(self, **{k: cut(getattr(self, k)) for k in
-                                ("encoders", "wheel_speeds", "gps", "gyro", "ranges", "velocity", "truth")})
+        return replace(self, **{k: cut(getattr(self, k)) for k in (*SENSOR_FILE, "truth")})
 
 
 def _optional(path: Path):
@@ -152,7 +196,7 @@ def read_log(directory: Path | str) -> Log:
     if not d.is_dir():
         raise LogFormatError(d, "log directory does not exist")
     robot = load_robot(d / "robot.toml")
-    enc = ws = gps = gyro = rng = vel = truth = None
+    truth = None
     dups: dict[str, int] = {}
     origin: list[int] = []
 
@@ -170,39 +214,13 @@ def read_log(directory: Path | str) -> Log:
     if _optional(d / "encoders.csv") and _optional(d / "wheel_speeds.csv"):
         raise LogFormatError(d, "has both encoders.csv and wheel_speeds.csv; they are alternatives "
                                 "(LOG_FORMAT.md): keep the one to use")
-    if (p := _optional(d / "encoders.csv")):
-        c = read_table(p, ("t", "ticks_left", "ticks_right"))
-        if len(c["t"]) < 2:
-            raise LogFormatError(p, "needs at least two rows (the first only starts the count)")
-        enc = Encoders(c["t"], c["ticks_left"], c["ticks_right"])
-    if (p := _optional(d / "wheel_speeds.csv")):
-        c = read_table(p, ("t", "v_left", "v_right"))
-        if len(c["t"]) < 2:
-            raise LogFormatError(p, "needs at least two rows")
-        ws = WheelSpeeds(c["t"], c["v_left"], c["v_right"])
-    if enc is None and ws is None:
+    if not _optional(d / "encoders.csv") and not _optional(d / "wheel_speeds.csv"):
         raise LogFormatError(d / "encoders.csv", "file is missing (a log needs encoders.csv or wheel_speeds.csv)")
-    if (p := _optional(d / "gps.csv")):
-        gps = _read_gps(p, robot, read_table)
-    if (p := _optional(d / "gyro.csv")):
-        c = read_table(p, ("t", "omega"))
-        gyro = Gyro(c["t"], c["omega"])
-    if (p := _optional(d / "ranges.csv")):
-        c = read_table(p, ("t", "beacon", "range"), text_columns=("beacon",), equal_times=True)
-        idx = np.empty(len(c["t"]), dtype=np.int64)
-        known = {b.id: i for i, b in enumerate(robot.beacons)}
-        for k, (b, ln) in enumerate(zip(c["beacon"], c["_line"])):
-            if b not in known:
-                raise LogFormatError(p, f"unknown beacon '{shown(b)}' (robot.toml [range].beacons has "
-                                        f"{shown(str(sorted(known)), 120) if known else 'none'})", int(ln))
-            idx[k] = known[b]
-        neg = c["range"] < 0
-        if neg.any():
-            raise LogFormatError(p, "negative range", int(c["_line"][np.argmax(neg)]))
-        rng = Ranges(c["t"], idx, c["range"])
-    if (p := _optional(d / "velocity.csv")):
-        c = read_table(p, ("t", "v", "omega"))
-        vel = Velocity(c["t"], c["v"], c["omega"])
+    read: dict[str, object] = {}
+    for sf in SENSOR_FILES:
+        if (p := _optional(d / sf.file)):
+            read[sf.name] = (_SPECIAL_READERS[sf.name](p, robot, read_table) if sf.name in _SPECIAL_READERS
+                             else _read_plain(sf, p, read_table))
     if (p := _optional(d / "truth.csv")):
         c = read_table(p, ("t", "x", "y"), optional=TRUTH_COLUMNS[2:])
         truth = Truth(c["t"], {k: c[k] for k in TRUTH_COLUMNS if k in c})
@@ -222,7 +240,7 @@ def read_log(directory: Path | str) -> Log:
             raise LogFormatError(p, f"scale factors must be positive finite numbers, got {list(scales)}")
     warn = tuple(f"{name}: {int(n)} row(s) written twice (same stamp and values) were read once"
                  for name, n in dups.items() if n)
-    log = Log(robot, enc, ws, gps, gyro, rng, vel, truth, scales, path=d, warnings=warn,
+    log = Log(robot, **read, truth=truth, truth_scales=scales, path=d, warnings=warn,
               t_origin=origin[0] if origin else 0)
     check_log(log)
     return log
@@ -304,8 +322,7 @@ MAX_DURATION = 3.2e7
 #: Longest plausible median wheel-odometry interval [s]: 5 s is 0.2 Hz.
 MAX_WHEEL_INTERVAL = 5.0
 
-_FILES = {"encoders": "encoders.csv", "wheel_speeds": "wheel_speeds.csv", "gps": "gps.csv", "gyro": "gyro.csv",
-          "ranges": "ranges.csv", "velocity": "velocity.csv", "truth": "truth.csv"}
+_FILES = {**{sf.name: sf.file for sf in SENSOR_FILES}, "truth": "truth.csv"}
 
 
 def _unit_guess(value: float, lo: float, hi: float, interval: float | None = None) -> str:
@@ -371,6 +388,31 @@ def check_clock(log: Log) -> None:
                                                   "the files of a log share one clock and unit (seconds)")
 
 
+def _read_plain(sf: SensorFile, p: Path, read_table):
+    """A sensor file whose columns are plain numbers, as its dataclass."""
+    c = read_table(p, ("t", *sf.required), optional=sf.columns[len(sf.required):])
+    n, why = sf.min_rows
+    if len(c["t"]) < n:
+        raise LogFormatError(p, f"needs at least {'two' if n == 2 else n} rows{why}")
+    return sf.cls(c["t"], *(c.get(k) for k in sf.columns))
+
+
+def _read_ranges(p: Path, robot: RobotConfig, read_table=_read_table) -> Ranges:
+    """ranges.csv: beacon ids (text) become indices into robot.toml's beacons."""
+    c = read_table(p, ("t", "beacon", "range"), text_columns=("beacon",), equal_times=True)
+    idx = np.empty(len(c["t"]), dtype=np.int64)
+    known = {b.id: i for i, b in enumerate(robot.beacons)}
+    for k, (b, ln) in enumerate(zip(c["beacon"], c["_line"])):
+        if b not in known:
+            raise LogFormatError(p, f"unknown beacon '{shown(b)}' (robot.toml [range].beacons has "
+                                    f"{shown(str(sorted(known)), 120) if known else 'none'})", int(ln))
+        idx[k] = known[b]
+    neg = c["range"] < 0
+    if neg.any():
+        raise LogFormatError(p, "negative range", int(c["_line"][np.argmax(neg)]))
+    return Ranges(c["t"], idx, c["range"])
+
+
 def _read_gps(p: Path, robot: RobotConfig, read_table=_read_table) -> Gps:
     cols = header_of(p)
     if "lat" in cols or "lon" in cols:
@@ -389,6 +431,11 @@ def _read_gps(p: Path, robot: RobotConfig, read_table=_read_table) -> Gps:
     if sigma is not None and (sigma <= 0).any():
         raise LogFormatError(p, "sigma must be positive", int(c["_line"][np.argmax(sigma <= 0)]))
     return Gps(c["t"], x, y, sigma)
+
+
+#: Sensors read by their own function (p, robot, read_table): GPS in either
+#: coordinate form, ranges naming their beacons.
+_SPECIAL_READERS = {"gps": _read_gps, "ranges": _read_ranges}
 
 
 def rebased(log: Log) -> Log:
@@ -417,28 +464,20 @@ def write_log(log: Log, directory: Path | str, inputs=()) -> Path:
         return stamp_text(t, o)
     with atomic_output_dir(directory, inputs, kind="log") as d:
         (d / "robot.toml").write_text(robot_toml(log.robot), encoding="utf-8")
-        if log.encoders is not None:
-            e = log.encoders
-            write_table(d / "encoders.csv", {"t": T(e.t), "ticks_left": e.ticks_left, "ticks_right": e.ticks_right},
-                        {"t": "%.6f", "ticks_left": "%.0f", "ticks_right": "%.0f"})
-        if log.wheel_speeds is not None:
-            w = log.wheel_speeds
-            write_table(d / "wheel_speeds.csv", {"t": T(w.t), "v_left": w.v_left, "v_right": w.v_right},
-                        {"t": "%.6f", "v_left": "%.6f", "v_right": "%.6f"})
-        if log.gps is not None:
-            g = log.gps
-            cols = {"t": T(g.t), "x": g.x, "y": g.y, **({"sigma": g.sigma} if g.sigma is not None else {})}
-            write_table(d / "gps.csv", cols, {"t": "%.6f", "x": "%.5f", "y": "%.5f", "sigma": "%.5f"})
-        if log.gyro is not None:
-            write_table(d / "gyro.csv", {"t": T(log.gyro.t), "omega": log.gyro.omega}, {"t": "%.6f", "omega": "%.7f"})
-        if log.ranges is not None:
-            r = log.ranges
-            ids = np.asarray([log.robot.beacons[i].id for i in r.beacon], dtype=str)
-            write_table(d / "ranges.csv", {"t": T(r.t), "beacon": ids, "range": r.range}, {"t": "%.6f", "range": "%.5f"})
-        if log.velocity is not None:
-            v = log.velocity
-            write_table(d / "velocity.csv", {"t": T(v.t), "v": v.v, "omega": v.omega},
-                        {"t": "%.6f", "v": "%.6f", "omega": "%.6f"})
+        for sf in SENSOR_FILES:
+            obj = getattr(log, sf.name)
+            if obj is None:
+                continue
+            cols, fmts = {"t": T(obj.t)}, {"t": "%.6f"}
+            for k, f in zip(sf.columns, sf.formats):
+                v = getattr(obj, k)
+                if sf.name == "ranges" and k == "beacon":
+                    v = np.asarray([log.robot.beacons[i].id for i in v], dtype=str)
+                if v is not None:          # an optional column left out (gps' sigma)
+                    cols[k] = v
+                if f is not None:
+                    fmts[k] = f
+            write_table(d / sf.file, cols, fmts)
         if log.truth is not None:
             write_table(d / "truth.csv", {"t": T(log.truth.t), **log.truth.values}, {"t": "%.6f"})
         if log.truth_scales is not None:

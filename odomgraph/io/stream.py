@@ -23,14 +23,12 @@ import numpy as np
 
 from odomgraph import state as S
 from odomgraph.io.csvtable import stamp_text
-from odomgraph.io.log import Log
+from odomgraph.io.log import SENSOR_FILES, Log
 
 #: Each sensor's values on a line, in order: its LOG_FORMAT.md columns after
-#: ``t`` (gps's third, sigma [m], is optional). One table for the stream's
-#: reader (odomgraph.online) and writer (log_lines).
-SENSOR_COLUMNS = {"encoders": ("ticks_left", "ticks_right"), "wheel_speeds": ("v_left", "v_right"),
-                  "gps": ("x", "y", "sigma"), "gyro": ("omega",), "ranges": ("beacon", "range"),
-                  "velocity": ("v", "omega")}
+#: ``t`` (io.log.SENSOR_FILES; gps's third, sigma [m], is optional). One table
+#: for the stream's reader (odomgraph.online) and writer (log_lines).
+SENSOR_COLUMNS = {sf.name: sf.columns for sf in SENSOR_FILES}
 
 #: states.csv's header line.
 HEADER = ",".join(("t",) + S.NAMES + tuple(f"sigma_{n}" for n in S.NAMES))
@@ -73,7 +71,7 @@ def exact_stamp(t: float, origin: int = 0) -> str:
 
 
 #: Sensors in the order lines of equal stamps are merged.
-_ORDER = ("encoders", "wheel_speeds", "gyro", "gps", "ranges", "velocity")
+_ORDER = tuple(sf.name for sf in sorted(SENSOR_FILES, key=lambda sf: sf.tie))
 
 
 def log_lines(log: Log) -> Iterator[str]:
