@@ -250,8 +250,8 @@ class Online:
         """An output row; its scale factors against robot.toml's (a restart carries them in the robot)."""
         if not np.all(self._base == 1.0):
             mean, sigma = mean.copy(), sigma.copy()
-            mean[8:11] *= self._base
-            sigma[8:11] *= self._base
+            mean[S.SCALE_S] *= self._base
+            sigma[S.SCALE_S] *= self._base
         return OnlineRow(float(t), mean, sigma, pose_cov, self.t_origin or 0)
 
     # ------------------------------------------------------------ input
@@ -469,7 +469,7 @@ class Online:
         if self.last is not None:
             x, y, th = (float(v) for v in self.last.mean[:3])
             sx, sy, sth = (float(v) for v in self.last.sigma[:3])
-            sc = self.last.mean[8:11]
+            sc = self.last.mean[S.SCALE_S]
             if np.all(np.abs(sc - 1.0) < 0.1):
                 r = self.robot
                 # Kept with what was known of them (3 sigma, at least RESTART_SCALE_SIGMA): a
@@ -477,7 +477,7 @@ class Online:
                 # scale factors against the unknowns of its first seconds, and frozen
                 # linearisations from then kept a track scale 6 % off at 15 sigma.
                 sig = float(min(getattr(self, "_scale_sigma", r.process.initial_scale_sigma),
-                                max(RESTART_SCALE_SIGMA, 3.0 * float(np.max(self.last.sigma[8:11] / self._base)))))
+                                max(RESTART_SCALE_SIGMA, 3.0 * float(np.max(self.last.sigma[S.SCALE_S] / self._base)))))
                 self.robot = r.with_(ticks_per_meter_left=r.ticks_per_meter_left * float(sc[0] / self._base[0]),
                                      ticks_per_meter_right=r.ticks_per_meter_right * float(sc[1] / self._base[1]),
                                      track_width=r.track_width * float(sc[2] / self._base[2]),

@@ -139,7 +139,7 @@ def initial_guess(prob: Problem, ekf: Estimate) -> tuple[np.ndarray, np.ndarray]
     mid = np.append(0.5 * (t[1:] + t[:-1]), t[-1])
     for j, i in enumerate(range(S.V, S.N)):
         W[:, j] = np.interp(mid, ekf.t, m[:, i])
-    W[:, 5:8] = m[-1, S.SCALE]
+    W[:, S.W_SCALE] = m[-1, S.SCALE]
     # v and omega of each interval from its two poses, so that the start obeys
     # the motion model: the motion rows are 1e-4 rad / 1 mm tight, and the
     # filter's rates at interval midpoints miss its own poses by enough for a
@@ -189,7 +189,7 @@ def robust_initial_guess(prob: Problem, meas) -> tuple[np.ndarray, np.ndarray]:
     W = np.zeros((kf.n, 8))
     W[:-1, 0], W[:-1, 1] = v, w
     W[-1] = W[-2]
-    W[:, 5:8] = prob.prior_mean[S.SCALE]
+    W[:, S.W_SCALE] = prob.prior_mean[S.SCALE]
     W[:, 2] = prob.prior_mean[S.BIAS]
     fixes = None
     if meas.gps is not None:
@@ -607,7 +607,7 @@ def run_batch(log: Log, schedule: Schedule = Schedule(), options: SmootherOption
         pose, W = growing_window_guess(prob, prob.meas)
         start = "started from a growing-window solve (the EKF failed or had to recover)"
     if options.wheel_speed_units:
-        prob.speed_ref = W[0, 5:8].copy()   # the units of the random walks (graph.linearize)
+        prob.speed_ref = W[0, S.W_SCALE].copy()   # the units of the random walks (graph.linearize)
     pose, W, iters, cost, rb, converged = solve(prob, pose, W, options, progress)
     if not (np.all(np.isfinite(pose)) and np.all(np.isfinite(W))):
         raise EstimatorDivergedError("batch smoother diverged: non-finite estimate")

@@ -216,18 +216,18 @@ def add_process_noise(P: np.ndarray, J: np.ndarray, dt: float, q: dict, q_slip: 
     one stays scalar because it runs once per event (the throughput benchmark
     measured the broadcasting version about 25 % slower on the yard log).
     """
-    G = J[:, 3:5]
+    G = J[:, VEL_IDX]                  # the step's columns are the state's first five
     qv, qw = q["v"], q["w"]
     Gq = G * (qv, qw)
-    P[0:3, 0:3] += (dt / 3.0) * (Gq @ G.T)
-    P[0:3, 3:5] += (0.5 * dt) * Gq
-    P[3:5, 0:3] += (0.5 * dt) * Gq.T
+    P[POSE_IDX, POSE_IDX] += (dt / 3.0) * (Gq @ G.T)
+    P[POSE_IDX, VEL_IDX] += (0.5 * dt) * Gq
+    P[VEL_IDX, POSE_IDX] += (0.5 * dt) * Gq.T
     P[3, 3] += qv * dt
     P[4, 4] += qw * dt
     P[5, 5] += q["bias"] * dt
-    P[6:8, 6:8] += q_slip * dt
+    P[SLIP_IDX, SLIP_IDX] += q_slip * dt
     if q["scale"]:
-        P[8:11, 8:11] += np.eye(3) * q["scale"] * dt
+        P[SCALE_IDX, SCALE_IDX] += np.eye(3) * q["scale"] * dt
 
 
 def _inv_small(A: np.ndarray) -> np.ndarray:

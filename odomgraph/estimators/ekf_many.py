@@ -39,17 +39,17 @@ _I = np.eye(S.N)
 
 def add_process_noise_many(P: np.ndarray, J: np.ndarray, dt: float, q: dict, q_slip: np.ndarray) -> None:
     """ekf.add_process_noise for a batch: P (N, 11, 11), J (N, 3, 5), one dt."""
-    G = J[:, :, 3:5]
+    G = J[:, :, VEL_IDX]
     Gq = G * (q["v"], q["w"])
-    P[:, 0:3, 0:3] += (dt / 3.0) * (Gq @ np.swapaxes(G, 1, 2))
-    P[:, 0:3, 3:5] += (0.5 * dt) * Gq
-    P[:, 3:5, 0:3] += (0.5 * dt) * np.swapaxes(Gq, 1, 2)
+    P[:, POSE_IDX, POSE_IDX] += (dt / 3.0) * (Gq @ np.swapaxes(G, 1, 2))
+    P[:, POSE_IDX, VEL_IDX] += (0.5 * dt) * Gq
+    P[:, VEL_IDX, POSE_IDX] += (0.5 * dt) * np.swapaxes(Gq, 1, 2)
     P[:, 3, 3] += q["v"] * dt
     P[:, 4, 4] += q["w"] * dt
     P[:, 5, 5] += q["bias"] * dt
-    P[:, 6:8, 6:8] += q_slip * dt
+    P[:, SLIP_IDX, SLIP_IDX] += q_slip * dt
     if q["scale"]:
-        P[:, 8:11, 8:11] += np.eye(3) * q["scale"] * dt
+        P[:, SCALE_IDX, SCALE_IDX] += np.eye(3) * q["scale"] * dt
 
 
 def _inv_small(A: np.ndarray) -> np.ndarray:

@@ -28,6 +28,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from odomgraph import state as S
 from odomgraph.factors import encoder, gps as gps_model, gyro, pose2, ranging
 from odomgraph.factors.motion import arc_at, transition_residual
 from odomgraph.estimators.initial import InitialState
@@ -36,8 +37,19 @@ from odomgraph.estimators.keyframes import Keyframes
 from odomgraph.io.robot import RobotConfig
 
 NB = 11  # tangent dimension of a keyframe block
-# W columns inside a block
-V, OM, B, SL, SR, KL, KR, KB = range(3, 11)
+# W's columns inside a block [pose, W]: the state's indices (state.W_OFFSET)
+V, OM, B, SL, SR, KL, KR, KB = S.V, S.OMEGA, S.BIAS, S.SLIP_L, S.SLIP_R, S.SCALE_L, S.SCALE_R, S.SCALE_B
+WSL, WSC, WWS = S.W_SLIP, S.W_SCALE, S.W_WHEEL_SCALE
+#: The rows of one interval's unary factor, in order: the wheels (2), the
+#: gyro (1), the velocity sensor (2), the slip prior (2), then two per GPS
+#: fix (Problem.g_max of them) and one per range (Problem.r_max).
+ROW_ENC, ROW_GYRO, ROW_VEL, ROW_SLIP = slice(0, 2), 2, slice(3, 5), slice(5, 7)
+ROW_FIXES = 7
+
+
+def unary_rows(g_max: int, r_max: int) -> int:
+    """How many rows an interval's unary factor has."""
+    return ROW_FIXES + 2 * g_max + r_max
 _ENC_COLS = [V, OM, SL, SR, KL, KR, KB]
 SCALE_FLOOR = 1e-5  # scale-factor random walk floor [1/sqrt(s)]
 
@@ -97,6 +109,14 @@ class Problem:
     def n_bias(self) -> int:
         return len(self.robot.beacons) if self.range_bias_sigma is not None else 0
 
+    def gps_rows(self, slot):
+        """The first of the two unary rows of the GPS fixes in slots ``slot``."""
+        return ROW_FIXES + 2 * slot
+
+    def range_rows(self, slot):
+        """The unary row of the ranges in slots ``slot`` (without range biases)."""
+        return ROW_FIXES + 2 * self.g_max + slot
+
     def __post_init__(self):
         kf = self.kf
         # Fixed row layout of the unary factor of each interval. With range
@@ -105,7 +125,7 @@ class Problem:
         self.r_max = int(np.bincount(kf.rng_k, minlength=kf.n - 1).max()) if kf.rng_k.size else 0
         if self.range_bias_sigma is not None:
             self.r_max = 0
-        self.rows_unary = 2 + 1 + 2 + 2 + 2 * self.g_max + self.r_max
+        self.rows_unary = unary_rows(self.g_max, self.r_max)
         self.gps_slot = _slots(kf.gps_k)
         self.rng_slot = _slots(kf.rng_k)
         dt = kf.dt
@@ -140,7 +160,7 @@ class RandomWalkSteps:
         """(8, 8): ProcessNoise ``pn``'s intensities squared, q_slip (2, 2) [(m/s)^2/s] on the slips."""
         Q = np.zeros((8, 8))
         Q[0, 0], Q[1, 1], Q[2, 2] = pn.accel**2, pn.yaw_accel**2, pn.gyro_bias**2
-        Q[3:5, 3:5] = q_slip
+        Q[WSL, WSL] = q_slip
         Q[5, 5] = Q[6, 6] = Q[7, 7] = max(pn.scale, SCALE_FLOOR) ** 2
         return Q
 
@@ -244,7 +264,7 @@ def walk_rows(prob: Problem, W: np.ndarray, k0: int, k1: int):
         # walk: heading sensors pin its scale, and a walk on scale_track x
         # omega measured worse (a track bias with a noisy gyro and good GPS).
         ref = np.asarray(prob.speed_ref, float)
-        sc0, sc1 = w0[:, 5:8] / ref, w1[:, 5:8] / ref
+        sc0, sc1 = w0[:, WSC] / ref, w1[:, WSC] / ref
         A_w0, A_w1 = A_w0.copy(), A_w1.copy()
         f0, f1 = 0.5 * (sc0[:, 0] + sc0[:, 1]), 0.5 * (sc1[:, 0] + sc1[:, 1])
         a = A_w[:, 0, 0]                                          # v: a diagonal whitener row
@@ -256,14 +276,14 @@ def walk_rows(prob: Problem, W: np.ndarray, k0: int, k1: int):
         for c in (5, 6):
             A_w0[:, 0, c] = -a * w0[:, 0] / (2 * ref[c - 5])
             A_w1[:, 0, c] = a * w1[:, 0] / (2 * ref[c - 5])
-        L = A_w[:, 3:5, 3:5]                                      # slips: a 2x2 block
-        b_w[:, 3:5] = -np.einsum("kij,kj->ki", L, sc1[:, 0:2] * w1[:, 3:5] - sc0[:, 0:2] * w0[:, 3:5])
-        A_w0[:, 3:5, :] = 0.0
-        A_w1[:, 3:5, :] = 0.0
-        A_w0[:, 3:5, 3:5] = -L * sc0[:, None, 0:2]
-        A_w0[:, 3:5, 5:7] = -L * (w0[:, 3:5] / ref[0:2])[:, None, :]
-        A_w1[:, 3:5, 3:5] = L * sc1[:, None, 0:2]
-        A_w1[:, 3:5, 5:7] = L * (w1[:, 3:5] / ref[0:2])[:, None, :]
+        L = A_w[:, WSL, WSL]                                      # slips: a 2x2 block
+        b_w[:, WSL] = -np.einsum("kij,kj->ki", L, sc1[:, 0:2] * w1[:, WSL] - sc0[:, 0:2] * w0[:, WSL])
+        A_w0[:, WSL, :] = 0.0
+        A_w1[:, WSL, :] = 0.0
+        A_w0[:, WSL, WSL] = -L * sc0[:, None, 0:2]
+        A_w0[:, WSL, WWS] = -L * (w0[:, WSL] / ref[0:2])[:, None, :]
+        A_w1[:, WSL, WSL] = L * sc1[:, None, 0:2]
+        A_w1[:, WSL, WWS] = L * (w1[:, WSL] / ref[0:2])[:, None, :]
     return A_w0, A_w1, b_w
 
 
@@ -299,10 +319,10 @@ def slip_prior_rows(prob: Problem, w: np.ndarray, zero: np.ndarray):
         # scale x slip it would tie the scale to the slip wherever an estimate
         # passes far from zero (a restart far off went to a track 9 % off).
         ref = np.asarray(prob.speed_ref, float)[0:2]
-        sc = np.where(zero[:, None], 1.0, w[:, 5:7] / ref)
-        slip, d_slip, d_scale = sc * w[:, 3:5], sc, np.where(zero[:, None], 0.0, w[:, 3:5] / ref)
+        sc = np.where(zero[:, None], 1.0, w[:, WWS] / ref)
+        slip, d_slip, d_scale = sc * w[:, WSL], sc, np.where(zero[:, None], 0.0, w[:, WSL] / ref)
     else:
-        slip, d_slip, d_scale = w[:, 3:5], np.ones((n, 2)), None
+        slip, d_slip, d_scale = w[:, WSL], np.ones((n, 2)), None
     sw, slip_cost = s_fixed, 0.0
     if prob.slip_robust is not None:
         c = prob.slip_robust
@@ -340,24 +360,24 @@ def linearize(prob: Problem, pose: np.ndarray, W: np.ndarray, k0: int = 0, k1: i
     # --- encoder over each interval (eq. 29-34), exact for the averages.
     h, J = encoder.wheel_speeds(w[:, 0], w[:, 1], w[:, 3], w[:, 4], w[:, 5], w[:, 6], w[:, 7], r.track_width)
     inv = 1.0 / kf.enc_sigma[k0:k1]
-    b_u[:, 0:2] = -(h - kf.enc_m[k0:k1]) * inv
-    A_u[:, 0:2][:, :, _ENC_COLS] = J * inv[:, :, None]
+    b_u[:, ROW_ENC] = -(h - kf.enc_m[k0:k1]) * inv
+    A_u[:, ROW_ENC][:, :, _ENC_COLS] = J * inv[:, :, None]
     # --- gyro average (eq. 10-11), and the velocity sensor's (sec. VI-B); keyframes.interval_means.
     s = 1.0 / kf.gyro_sigma[k0:k1]
     if np.any(s > 0):
         h, J = gyro.yaw_rate(w[:, 1], w[:, 2])
-        b_u[:, 2] = -(h[:, 0] - kf.gyro_z[k0:k1]) * s
-        A_u[:, 2, OM] = J[:, 0, 0] * s
-        A_u[:, 2, B] = J[:, 0, 1] * s
+        b_u[:, ROW_GYRO] = -(h[:, 0] - kf.gyro_z[k0:k1]) * s
+        A_u[:, ROW_GYRO, OM] = J[:, 0, 0] * s
+        A_u[:, ROW_GYRO, B] = J[:, 0, 1] * s
     s = 1.0 / kf.vel_sigma[k0:k1]
     if np.any(s > 0):
-        b_u[:, 3:5] = -(w[:, 0:2] - kf.vel_z[k0:k1]) * s
-        A_u[:, 3, V] = s[:, 0]
-        A_u[:, 4, OM] = s[:, 1]
+        b_u[:, ROW_VEL] = -(w[:, S.W_VEL] - kf.vel_z[k0:k1]) * s
+        A_u[:, ROW_VEL.start, V] = s[:, 0]
+        A_u[:, ROW_VEL.start + 1, OM] = s[:, 1]
     # --- slip: the schedule's zero-slip pseudo-prior (eq. 35-36) inside the
     # calibration window; outside it, optionally a sparse (Cauchy) zero prior.
-    b_u[:, 5:7], A_s, slip_cost = slip_prior_rows(prob, w, prob.zero_slip[k0:k1])
-    A_u[:, 5:7][:, :, [SL, SR, KL, KR]] = A_s
+    b_u[:, ROW_SLIP], A_s, slip_cost = slip_prior_rows(prob, w, prob.zero_slip[k0:k1])
+    A_u[:, ROW_SLIP][:, :, [SL, SR, KL, KR]] = A_s
     # --- GPS fixes (eq. 8-9) at tau after t_k, on the arc flown from X_k.
     g0, g1 = np.searchsorted(kf.gps_k, [k0, k1])
     if g1 > g0:
@@ -372,7 +392,7 @@ def linearize(prob: Problem, pose: np.ndarray, W: np.ndarray, k0: int = 0, k1: i
             sw, rho = robust_weight(u, prob.robust, prob.loss_k())
             robust_cost += float(np.sum(rho - 0.5 * (sw * u) ** 2))   # replaces the weighted square below
             inv = inv * sw[:, None]
-        rows = 7 + 2 * prob.gps_slot[g0:g1]
+        rows = prob.gps_rows(prob.gps_slot[g0:g1])
         for j in range(2):
             b_u[k, rows + j] = -(h[:, j] - kf.gps_xy[g0:g1, j]) * inv[:, 0]
             A_u[k, rows + j, 0:3] = pose2.to_body(Jt[:, j:j + 1, 0:3], th[k])[:, 0] * inv
@@ -407,7 +427,7 @@ def linearize(prob: Problem, pose: np.ndarray, W: np.ndarray, k0: int = 0, k1: i
             A_rb = np.zeros((q1 - q0, nb))
             A_rb[np.arange(q1 - q0), kf.rng_id[q0:q1]] = Jh[:, 0, 3] * inv
         else:
-            rows = 7 + 2 * prob.g_max + prob.rng_slot[q0:q1]
+            rows = prob.range_rows(prob.rng_slot[q0:q1])
             b_u[k, rows] = rb
             A_u[k, rows] = ra
     if nb:

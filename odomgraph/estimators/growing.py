@@ -20,7 +20,7 @@ from dataclasses import fields, replace
 import numpy as np
 
 from odomgraph.estimators.batch import zero_slip_intervals
-from odomgraph.estimators.graph import Problem, RandomWalkSteps, motion_sigma, walk_span
+from odomgraph.estimators.graph import Problem, RandomWalkSteps, motion_sigma, unary_rows, walk_span
 from odomgraph.estimators.keyframes import Keyframes, build_keyframes
 from odomgraph.estimators.measurements import clean
 from odomgraph.io.log import Log
@@ -158,7 +158,7 @@ class GrowingProblem:
             p.g_max = max(p.g_max, g_max)
             if p.range_bias_sigma is None:
                 p.r_max = max(p.r_max, r_max)
-            p.rows_unary = 2 + 1 + 2 + 2 + 2 * p.g_max + p.r_max
+            p.rows_unary = unary_rows(p.g_max, p.r_max)
 
 
 def window_piece(raw: Log, t_from: float, t_to: float, keyframe_hz: float, step: int) -> Keyframes:

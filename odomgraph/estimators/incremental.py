@@ -169,13 +169,13 @@ class _Graph:
         t = float(kf.t[k])
         g0, g1 = np.searchsorted(kf.gps_k, [k, k + 1])
         for i in range(g0, g1):
-            rows = 7 + 2 * prob.gps_slot[i] + np.arange(2)
+            rows = prob.gps_rows(prob.gps_slot[i]) + np.arange(2)
             # the fix's own time (a stamp within the interval without gps_t)
             tf = float(kf.gps_t[i]) if kf.gps_t is not None else t + kf.dt[k] * (i - g0 + 1) / (g1 - g0)
             self._gate(("gps", 0), lin, rows, i, tf, float(kf.gps_sigma[i]))
         q0, q1 = np.searchsorted(kf.rng_k, [k, k + 1])
         for i in range(q0, q1):
-            rows = np.array([7 + 2 * prob.g_max + prob.rng_slot[i]])
+            rows = np.array([prob.range_rows(prob.rng_slot[i])])
             # ranges carry no time of their own here: the interval's end, so a
             # step within one interval is judged over the whole interval
             self._gate(("ranges", int(kf.rng_id[i])), lin, rows, i, t + kf.dt[k], self.prob.robot.range_sigma)
@@ -252,13 +252,13 @@ class _Graph:
         g0, g1 = np.searchsorted(kf.gps_k, [k, k + 1])
         for i in range(g0, g1):
             if ("gps", i) in self.held_rows:
-                rows = 7 + 2 * prob.gps_slot[i] + np.arange(2)
+                rows = prob.gps_rows(prob.gps_slot[i]) + np.arange(2)
                 lin.A_u[0, rows] = 0.0
                 lin.b_u[0, rows] = 0.0
         q0, q1 = np.searchsorted(kf.rng_k, [k, k + 1])
         for i in range(q0, q1):
             if ("ranges", i) in self.held_rows:
-                rows = np.array([7 + 2 * prob.g_max + prob.rng_slot[i]])
+                rows = np.array([prob.range_rows(prob.rng_slot[i])])
                 lin.A_u[0, rows] = 0.0
                 lin.b_u[0, rows] = 0.0
 
@@ -322,7 +322,7 @@ class _Graph:
 
     def wheel_slip(self, w: np.ndarray) -> np.ndarray:
         """(2,) the slips of W row w (8,) in wheel-speed units [m/s]: (k_i / ref_i) s_i."""
-        return w[5:7] / np.asarray(self.prob.speed_ref, float)[0:2] * w[3:5]
+        return w[St.W_WHEEL_SCALE] / np.asarray(self.prob.speed_ref, float)[0:2] * w[St.W_SLIP]
 
     def refresh_slip_priors(self, lo: int, hi: int, W, linear_index: dict, factors, remove: list) -> list[int]:
         """Re-linearise the slip priors of intervals lo <= j < hi whose slip, in
@@ -413,7 +413,7 @@ class _Runner:
         # A stream (estimators.growing) passes the problem it grows.
         self.prob = prob if prob is not None else build_problem(log, schedule, options, causal=True)
         if options.wheel_speed_units:
-            self.prob.speed_ref = self.prob.prior_mean[8:11].copy()   # the prior's scale factors
+            self.prob.speed_ref = self.prob.prior_mean[St.SCALE_S].copy()   # the prior's scale factors
         self.graph = _Graph(self.prob, options)
         n = self.prob.kf.n
         self.pose = np.zeros((n, 3))

@@ -27,10 +27,10 @@ GATED = (GPS, RANGE, VEL)
 #: instead of fancy-indexing copies in the filters' hot loops.
 ENC_IDX = np.array([S.V, S.OMEGA, S.SLIP_L, S.SLIP_R, S.SCALE_L, S.SCALE_R, S.SCALE_B])
 GYRO_IDX = slice(S.OMEGA, S.BIAS + 1)          # eq. 10-11: omega and the bias
-POSE_IDX = slice(S.X, S.THETA + 1)             # eq. 8-9, 12-16: GPS and ranges
-VEL_IDX = slice(S.V, S.OMEGA + 1)              # sec. VI-B: body velocity
-SLIP_IDX = slice(S.SLIP_L, S.SLIP_R + 1)       # eq. 35-36: the zero-slip pseudo-update
-SCALE_IDX = slice(S.SCALE_L, S.SCALE_B + 1)    # eq. 37-38: the scale-hold pseudo-update
+POSE_IDX = S.POSE_S                            # eq. 8-9, 12-16: GPS and ranges
+VEL_IDX = S.VEL_S                              # sec. VI-B: body velocity
+SLIP_IDX = S.SLIP_S                            # eq. 35-36: the zero-slip pseudo-update
+SCALE_IDX = S.SCALE_S                          # eq. 37-38: the scale-hold pseudo-update
 
 
 def event_stream(meas: Measurements, t0: float):
