@@ -615,8 +615,22 @@ def weak_online(results: Path) -> str:
             f"  Now {_rng(cov, '{:.0f}')} % of `online.csv` lies inside ±3σ (worse of x and y; "
             f"{len(bad)} of {len(rows)} runs\n  below 95 %), the largest errors "
             f"{_rng([r['max_error_m'] for r in rows], '{:.0f}')} m at up to "
-            f"{max(r['max_z'] for r in rows):.0f}σ; {stopped} stopped: the overshoots the\n"
-            "  watch misses are still far outside σ.\n\n  " + _source("weak_gps", d))
+            f"{max(r['max_z'] for r in rows):.0f}σ; {stopped} stopped. " + _weak_online_flags(rows)
+            + "\n\n  " + _source("weak_gps", d))
+
+
+def _weak_online_flags(rows: list) -> str:
+    """Whether the runs whose causal rows went far outside sigma were flagged
+    (analysis.plausible.revision_warnings: rows that jumped)."""
+    far = [r for r in rows if r["max_z"] > 6.0]
+    if not far:
+        return "No run's rows went beyond 6σ."
+    flagged = [r for r in far if r.get("jump_flagged")]
+    seeds = ", ".join(str(r["seed"]) for r in far)
+    return (f"The rows of {len(far)} run(s) went beyond 6σ (seeds {seeds});\n  {len(flagged)} of them "
+            "flagged `degraded`: their causal rows jumped further than their\n  σ allowed "
+            "(`analysis/plausible.revision_warnings`)"
+            + ("." if len(flagged) == len(far) else "; the others are still far outside σ unflagged."))
 
 
 def _weak_whole(d: dict) -> str:

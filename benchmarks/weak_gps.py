@@ -77,6 +77,7 @@ def _online_rows() -> list[dict]:
         out.append({"seed": seed, "status": status_of(est)[0], "coverage": float(np.mean(z <= 3.0)),
                     "max_error_m": float(np.hypot(ex, ey).max()), "max_z": float(z.max()),
                     "recoveries": len(est.recoveries),
+                    "jump_flagged": any("landed further" in w for w in est.flags),
                     "heading_unknown": any("heading not observable" in w for w in est.warnings)})
     return out
 

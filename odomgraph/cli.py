@@ -792,6 +792,7 @@ def stream(
     for p in (checkpoint, history):
         if p is not None and not p.parent.is_dir():
             raise _click_exc.UsageError(f"{p}: its directory does not exist")
+    _check_stream_outputs(checkpoint, history, (replay, robot, resume))
     if resume is not None:
         live = Online.load(resume)
         check_resume(live, method.value)
@@ -824,10 +825,31 @@ def stream(
     if history is not None:
         if live.final is None:
             raise _click_exc.UsageError("--history: only isam2 and fixed-lag smooth the whole stream")
-        from odomgraph.io.estimate import write_states
+        from odomgraph.io.estimate import is_states_file, write_states
+        from odomgraph.io.outdir import atomic_output_file
         live.final.t_origin = live.t_origin or 0
-        write_states(history, live.final)
+        with atomic_output_file(history, (replay, robot, resume, checkpoint), is_ours=is_states_file) as tmp:
+            write_states(tmp, live.final)
         typer.echo(f"odomgraph: wrote the smoothed history to {history}", err=True)
+
+
+def _check_stream_outputs(checkpoint: Path | None, history: Path | None, inputs: tuple) -> None:
+    """The files ``stream`` writes, held to the rules of ``-o``: never an
+    input (the replayed log, robot.toml), never a file odomgraph did not
+    write. A checkpoint may replace the one it resumes from (``inputs``:
+    the replayed log, robot.toml, the checkpoint resumed from)."""
+    from odomgraph.errors import OutputDirError
+    from odomgraph.io.estimate import is_states_file
+    from odomgraph.io.outdir import check_output
+    from odomgraph.online import Online
+    if checkpoint is not None:
+        check_output(checkpoint, inputs[:2], directory=False)
+        if checkpoint.exists() and not Online.is_checkpoint(checkpoint):
+            raise OutputDirError(f"{checkpoint}: exists and is not an odomgraph checkpoint; choose another file")
+    if history is not None:
+        check_output(history, (*inputs, checkpoint), directory=False)
+        if history.exists() and not is_states_file(history):
+            raise OutputDirError(f"{history}: exists and was not written by odomgraph; choose another output file")
 
 
 @app.command("import")

@@ -666,6 +666,17 @@ class Online:
         os.replace(tmp, path)
 
     @staticmethod
+    def is_checkpoint(path: Path | str) -> bool:
+        """Whether the file at ``path`` is one ``save`` wrote (its format
+        tag near the start), so that a checkpoint path never replaces a file
+        odomgraph did not write (a log's gps.csv, a robot.toml)."""
+        try:
+            with open(path, "rb") as f:
+                return b"odomgraph-online-1" in f.read(256)
+        except OSError:
+            return False
+
+    @staticmethod
     def load(path: Path | str) -> "Online":
         """An Online from ``save``'s checkpoint. A checkpoint is a pickle:
         load only your own (unpickling a foreign file can run its code)."""

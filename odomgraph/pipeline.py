@@ -111,7 +111,7 @@ def _estimate_checked(log: Log, method: Method, schedule: Schedule, progress, op
         from odomgraph.analysis.timing import gps_offset_warnings
         suspect += gps_offset_warnings(log, est)
     from odomgraph.analysis.gyrotiming import gyro_offset_warnings
-    suspect += gyro_offset_warnings(log) + _gap_warnings(est, log, options)
+    suspect += gyro_offset_warnings(log) + _gap_warnings(est, log, options) + _revision_warnings(est)
     est.warnings += [w for w in suspect if w not in est.warnings] + _window_warnings(est, log, schedule)
     est.flags += suspect
     _note_motion_scales(est, log, motion)
@@ -150,6 +150,21 @@ def _gap_warnings(est: Estimate, log: Log, options: dict) -> list[str]:
         o = est.online
         pc = o.pose_cov if o.pose_cov is not None else np.stack([np.diag(v) for v in o.sigma[:, 0:3] ** 2])
         out += gaps.gap_end_warnings(f"{est.method} (online.csv)", o.t, o.mean, pc, meas.gps, lever, path)
+    return out
+
+
+def _revision_warnings(est: Estimate) -> list[str]:
+    """Causal rows that jumped further than their sigma allowed
+    (analysis.plausible.revision_warnings): the EKF's and fixed-lag's
+    states.csv, isam2's online.csv. A smoothed trajectory (batch's, isam2's
+    states.csv) is not a sequence of estimates each revised by the next."""
+    from odomgraph.analysis.plausible import revision_warnings
+    out = []
+    if est.method.startswith("ekf") or est.method == "fixed-lag":
+        out += revision_warnings(est.method, est.t, est.mean, est.sigma)
+    if est.online is not None:
+        o = est.online
+        out += revision_warnings(f"{est.method} (online.csv)", o.t, o.mean, o.sigma)
     return out
 
 

@@ -70,6 +70,39 @@ def log_in_project(tmp_path, short_log):
 
 
 # ------------------------------------------------------------------ data loss
+@pytest.mark.parametrize("args,fragment", [
+    (("--checkpoint", "log/gps.csv"), "lies inside the input"),
+    (("--checkpoint", "log/robot.toml"), "lies inside the input"),
+    (("--checkpoint", "notes.txt"), "is not an odomgraph checkpoint"),
+    (("--checkpoint", "ck.pkl", "--history", "log/gyro.csv"), "lies inside the input"),
+    (("--checkpoint", "ck.pkl", "--history", "ck.pkl"), "is an input"),
+    (("--history", "notes.txt"), "was not written by odomgraph"),
+    (("--robot", "log/robot.toml", "--checkpoint", "log/robot.toml"), "is an input"),
+])
+def test_stream_files_never_replace_an_input_or_a_users_file(log_in_project, monkeypatch, args, fragment):
+    """A probe's: ``stream --checkpoint log/gps.csv`` left gps.csv a pickle,
+    ``--history log/gyro.csv`` a states table, ``--checkpoint notes.txt``
+    overwrote the user's notes; all exited 0."""
+    monkeypatch.chdir(log_in_project)
+    before = snapshot(log_in_project)
+    base = ("stream", "--method", "isam2") + (() if "--robot" in args else ("--replay", "log"))
+    res = runner.invoke(app, [*base, *args], input="")
+    one_line_error(res, fragment)
+    assert snapshot(log_in_project) == before
+
+
+def test_a_stream_checkpoint_replaces_its_own_and_the_history_its_own(log_in_project, monkeypatch):
+    monkeypatch.chdir(log_in_project)
+    for _ in range(2):                  # the second run replaces both files the first wrote
+        res = run("stream", "--replay", "log", "--method", "isam2", "--checkpoint", "ck.pkl", "--history", "h.csv")
+        assert res.exit_code == 0, res.output
+    from odomgraph.io.estimate import is_states_file
+    from odomgraph.online import Online
+    assert Online.is_checkpoint(log_in_project / "ck.pkl") and is_states_file(log_in_project / "h.csv")
+    res = run("stream", "--replay", "log", "--method", "isam2", "--resume", "ck.pkl", "--checkpoint", "ck.pkl")
+    assert res.exit_code == 0, res.output
+
+
 @pytest.mark.parametrize("command", ["estimate", "compare"])
 @pytest.mark.parametrize("where", ["the log", "its parent", "inside the log"])
 def test_output_never_replaces_or_enters_an_input(log_in_project, command, where):

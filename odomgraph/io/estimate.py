@@ -25,6 +25,21 @@ def write_states(path: Path, est: Estimate) -> None:
     write_table(path, states_columns(est), {k: "%.9g" for k in S.NAMES + tuple(f"sigma_{n}" for n in S.NAMES)})
 
 
+def is_states_file(path: Path) -> bool:
+    """Whether ``path`` holds a states.csv as odomgraph writes it (its
+    header line), so that writing one never replaces another kind of file."""
+    from odomgraph.io.csvtable import header_of
+    try:
+        return tuple(header_of(Path(path))) == tuple(states_columns_names())
+    except (OSError, LogFormatError, ValueError):
+        return False
+
+
+def states_columns_names() -> tuple[str, ...]:
+    """states.csv's header, in order."""
+    return ("t",) + S.NAMES + tuple(f"sigma_{n}" for n in S.NAMES)
+
+
 def _tum_lines(t_text, x, y, theta) -> str:
     return "".join(f"{t} {xi:.6f} {yi:.6f} 0 0 0 {np.sin(th / 2):.9f} {np.cos(th / 2):.9f}\n"
                    for t, xi, yi, th in zip(t_text, x, y, theta))
