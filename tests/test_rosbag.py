@@ -7,6 +7,7 @@ import pytest
 
 rosbags = pytest.importorskip("rosbags")
 
+from odomgraph import state as S  # noqa: E402
 from odomgraph.errors import LogFormatError  # noqa: E402
 from odomgraph.estimators.schedule import Schedule  # noqa: E402
 from odomgraph.io.importers.rosbag import import_rosbag  # noqa: E402
@@ -19,14 +20,15 @@ LAT0, LON0, R_WHEEL = 41.5045, -81.6086, 0.15
 
 
 def _write_bag(path, log, wheels="joints", imu_axis="z", tf_lever=None, no_fix_every=0, t0=0.0,
-               extra_odom=False, storage="sqlite3", imu_tf=False, **wheels_opts):
+               extra_odom=False, storage="sqlite3", imu_tf=False, nan_every=0, **wheels_opts):
     """A ROS 2 bag of ``log``: wheels as JointState positions or as the
     nav_msgs/Odometry twist; the gyro on IMU axis ``imu_axis`` ("-z": upside
     down); optionally /tf_static base_link -> gps with ``tf_lever``, every
     ``no_fix_every``-th fix without a fix (status -1), stamps moved by t0.
     ``wheels="twist"`` writes geometry_msgs/TwistStamped; ``imu_tf`` writes
     the IMU's mounting (yaw axis ``imu_axis``) into /tf_static; ``storage``:
-    sqlite3 or mcap."""
+    sqlite3 or mcap; ``nan_every``: every so many fixes a NaN latitude (status
+    0), IMU samples a NaN yaw rate and odometry twists an infinite speed."""
     from rosbags.rosbag1 import Writer as Writer1
     from rosbags.rosbag2 import StoragePlugin
     from rosbags.rosbag2 import Writer
@@ -100,7 +102,9 @@ def _write_bag(path, log, wheels="joints", imu_axis="z", tf_lever=None, no_fix_e
             vl, vr = e.ticks_left[1:] / (r.ticks_per_meter_left * dt), e.ticks_right[1:] / (r.ticks_per_meter_right * dt)
             v, om = 0.5 * (vl + vr), (vr - vl) / r.track_width
             P, Tw = T["geometry_msgs/msg/PoseWithCovariance"], T["geometry_msgs/msg/TwistWithCovariance"]
-            for t, vi, wi in zip(e.t[1:], v, om):
+            for k, (t, vi, wi) in enumerate(zip(e.t[1:], v, om)):
+                if nan_every and k % nan_every == 5:
+                    vi = np.inf
                 msg = T["nav_msgs/msg/Odometry"](
                     header=header(t), child_frame_id="base_link",
                     pose=P(pose=T["geometry_msgs/msg/Pose"](position=T["geometry_msgs/msg/Point"](x=0.0, y=0.0, z=0.0),
@@ -138,13 +142,16 @@ def _write_bag(path, log, wheels="joints", imu_axis="z", tf_lever=None, no_fix_e
             hd.frame_id = "gps"
             msg = T["sensor_msgs/msg/NavSatFix"](
                 header=hd, status=T["sensor_msgs/msg/NavSatStatus"](status=-1 if bad else 0, service=1),
-                latitude=LAT0 + np.degrees(y / M) + (1.0 if bad else 0.0),
+                latitude=(np.nan if nan_every and k % nan_every == 3 else
+                          LAT0 + np.degrees(y / M) + (1.0 if bad else 0.0)),
                 longitude=LON0 + np.degrees(x / (N * np.cos(np.radians(LAT0)))),
                 altitude=200.0, position_covariance=cov, position_covariance_type=2)
             w.write(cg, at(t), ser(msg, "sensor_msgs/msg/NavSatFix"))
         sign = -1.0 if imu_axis.startswith("-") else 1.0
-        for t, om in zip(log.gyro.t, log.gyro.omega):
+        for k, (t, om) in enumerate(zip(log.gyro.t, log.gyro.omega)):
             rate = {a: (sign * om if a == imu_axis[-1] else 0.001 * np.sin(7 * t)) for a in "xyz"}
+            if nan_every and k % nan_every == 7:
+                rate[imu_axis[-1]] = np.nan
             hd = header(t)
             hd.frame_id = "imu_link"
             msg = T["sensor_msgs/msg/Imu"](header=hd, orientation=Q(x=0.0, y=0.0, z=0.0, w=1.0),
@@ -239,6 +246,35 @@ def test_odometry_bag_imports_without_options(odom_bag):
     est = estimate(log, Method.batch, Schedule(None))
     for got, true in zip(est.mean[-1, 8:11], src.truth_scales):
         assert got == pytest.approx(true, rel=0.006)
+
+
+@pytest.mark.parametrize("storage", ["ros1", "sqlite3"])
+def test_non_finite_messages_are_dropped_counted_and_said(tmp_path, storage):
+    """A probe's ROS 1 bag: NavSatFix messages with a NaN latitude (status
+    0) and Imu messages with a NaN yaw rate were written into gps.csv and
+    gyro.csv as nan rows, the IMU axis check read no correlation, and the
+    log could not be estimated; an infinite odometry speed printed numpy
+    warnings. Here every 40th of each (other offsets, another seed)."""
+    log = simulate(paper(60).with_(slips=()), 8)
+    path = tmp_path / ("nan.bag" if storage == "ros1" else "nan")
+    _write_bag(path, log, wheels="odometry", imu_axis="y", storage=storage, nan_every=40, tf_lever=log.robot.gps_lever_arm)
+    import warnings as pywarnings
+    with pywarnings.catch_warnings():
+        pywarnings.simplefilter("error")                # no numpy RuntimeWarning on the way
+        got = import_rosbag(path, track_width=log.robot.track_width)
+    n = lambda total, off: len(range(off, total, 40))
+    assert len(got.gps.t) == len(log.gps.t) - n(len(log.gps.t), 3)
+    assert len(got.gyro.t) == len(log.gyro.t) - n(len(log.gyro.t), 7)
+    assert len(got.wheel_speeds.t) == len(log.encoders.t) - 1 - n(len(log.encoders.t) - 1, 5)
+    for arr in (got.gps.x, got.gps.y, got.gyro.omega, got.wheel_speeds.v_left, got.wheel_speeds.v_right):
+        assert np.all(np.isfinite(arr))
+    said = {line.split(":")[0]: int(line.split(": ")[1].split()[0]) for line in got.notes if "not a finite" in line}
+    assert said == {"/fix": n(len(log.gps.t), 3), "/imu": n(len(log.gyro.t), 7),
+                    "/diff_drive_controller/odom": n(len(log.encoders.t) - 1, 5)}
+    assert not [w for w in got.warnings if "no IMU axis" in w]           # the y axis still found
+    est = estimate(got, Method.batch, Schedule(None))
+    for k, true in zip(est.mean[-1, S.SCALE], log.truth_scales):
+        assert k == pytest.approx(true, rel=0.01)
 
 
 def test_imu_axis_can_be_forced_and_an_upside_down_imu_is_flipped(odom_bag, tmp_path):

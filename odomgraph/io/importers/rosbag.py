@@ -296,6 +296,8 @@ def import_rosbag(bag: Path | str, wheel_topic: str | None = None, left_joint: s
     wheels, fixes, rates = [], [], []
     kind = None
     fix_frame, imu_frame, no_fix = None, None, 0
+    # messages whose numbers are NaN or infinite (a receiver's "no value"), dropped and counted per topic
+    not_finite: dict[str, int] = {}
     try:
         with _reader(bag) as reader:
             conns = list(reader.connections)
@@ -381,6 +383,9 @@ def import_rosbag(bag: Path | str, wheel_topic: str | None = None, left_joint: s
                                        *(vel[[il, ir]] if vel.size else (np.nan, np.nan))))
                     else:
                         tw = msg.twist.twist if kind == "odometry" else msg.twist
+                        if not (np.isfinite(tw.linear.x) and np.isfinite(tw.angular.z)):
+                            not_finite[conn.topic] = not_finite.get(conn.topic, 0) + 1
+                            continue
                         wheels.append((stamp, tw.linear.x, tw.angular.z, np.nan, np.nan))
                 elif conn.topic in ticks:
                     ticks[conn.topic].append((stamp, int(msg.data)))
@@ -389,12 +394,18 @@ def import_rosbag(bag: Path | str, wheel_topic: str | None = None, left_joint: s
                     if msg.status.status < 0:
                         no_fix += 1
                         continue
+                    if not (np.isfinite(msg.latitude) and np.isfinite(msg.longitude)):
+                        not_finite[conn.topic] = not_finite.get(conn.topic, 0) + 1
+                        continue
                     cov = np.asarray(msg.position_covariance, float)
                     sig = float(np.sqrt(0.5 * (cov[0] + cov[4]))) if msg.position_covariance_type > 0 else np.nan
                     fixes.append((stamp, msg.latitude, msg.longitude, sig))
                 else:
                     imu_frame = msg.header.frame_id.lstrip("/")
                     a = msg.angular_velocity
+                    if not (np.isfinite(a.x) and np.isfinite(a.y) and np.isfinite(a.z)):
+                        not_finite[conn.topic] = not_finite.get(conn.topic, 0) + 1
+                        continue
                     rates.append((stamp, a.x, a.y, a.z))
             frames = _static_frames(reader, conns)
     except LogFormatError:
@@ -421,6 +432,8 @@ def import_rosbag(bag: Path | str, wheel_topic: str | None = None, left_joint: s
     gps, origin, gps_sigma = None, None, 0.05
     if no_fix:
         notes.append(f"{chosen['gps']}: {no_fix} messages without a fix (status < 0) dropped")
+    for topic, n in not_finite.items():
+        notes.append(f"{topic}: {n} messages with a value that is not a finite number (NaN or inf) dropped")
     if fixes:
         f = np.array(fixes)
         tf, lat, lon, sig = _increasing(f[:, 0], f[:, 1], f[:, 2], f[:, 3])
