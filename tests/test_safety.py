@@ -380,6 +380,41 @@ def test_both_wheel_files_are_refused(tmp_path, short_log):
     one_line_error(run("estimate", log, "-o", tmp_path / "out"), "both encoders.csv and wheel_speeds.csv")
 
 
+def _edited(tmp_path, short_log, name, text):
+    log = tmp_path / "log"
+    shutil.copytree(short_log, log)
+    (log / name).write_text(text(log / name))
+    return log
+
+
+def test_a_sensor_file_that_is_a_directory_is_refused(tmp_path, short_log):
+    """A probe's gyro.csv that was a directory was taken for no gyro, status ok."""
+    log = tmp_path / "log"
+    shutil.copytree(short_log, log)
+    (log / "gyro.csv").unlink()
+    (log / "gyro.csv").mkdir()
+    one_line_error(run("estimate", log, "-o", tmp_path / "out"), "gyro.csv: is not a file")
+
+
+def test_gps_with_both_coordinate_forms_is_refused_at_its_header(tmp_path, short_log):
+    """A probe's gps.csv with x,y and lat,lon columns used lat,lon silently."""
+    def both(p):
+        lines = p.read_text().splitlines()
+        return "\n".join(["# exported", lines[0] + ",lat,lon"] + [ln + ",47.0,8.0" for ln in lines[1:]]) + "\n"
+    log = _edited(tmp_path, short_log, "gps.csv", both)
+    one_line_error(run("estimate", log, "-o", tmp_path / "out"), "gps.csv:2: has both x,y and lat,lon columns")
+
+
+def test_fractional_ticks_are_refused_at_their_line(tmp_path, short_log):
+    def frac(p):
+        lines = p.read_text().splitlines()
+        t, a, b = lines[7].split(",")
+        lines[7] = f"{t},{int(float(a))}.25,{b}"
+        return "\n".join(lines) + "\n"
+    log = _edited(tmp_path, short_log, "encoders.csv", frac)
+    one_line_error(run("estimate", log, "-o", tmp_path / "out"), "encoders.csv:8: ticks_left", "not a whole number")
+
+
 def test_equal_range_stamps_are_allowed_and_the_message_prints_plain_numbers(tmp_path):
     from odomgraph.sim.scenarios import Rates
     from odomgraph.sim.simulate import beacons_around_path

@@ -187,7 +187,13 @@ class Log:
 
 
 def _optional(path: Path):
-    return path if path.is_file() else None
+    """The path if the file is there, None if it is not; a directory (or
+    anything else) by that name is refused rather than taken for no file."""
+    if path.is_file():
+        return path
+    if path.exists():
+        raise LogFormatError(path, "is not a file")
+    return None
 
 
 def read_log(directory: Path | str) -> Log:
@@ -394,6 +400,13 @@ def _read_plain(sf: SensorFile, p: Path, read_table):
     n, why = sf.min_rows
     if len(c["t"]) < n:
         raise LogFormatError(p, f"needs at least {'two' if n == 2 else n} rows{why}")
+    if sf.cls is Encoders:
+        for k in ("ticks_left", "ticks_right"):
+            frac = c[k] != np.round(c[k])
+            if frac.any():
+                i = int(np.argmax(frac))
+                raise LogFormatError(p, f"{k} {float(c[k][i]):g} is not a whole number of ticks (LOG_FORMAT.md: "
+                                        "ticks counted; wheel_speeds.csv takes speeds)", int(c["_line"][i]))
     return sf.cls(c["t"], *(c.get(k) for k in sf.columns))
 
 
@@ -415,6 +428,9 @@ def _read_ranges(p: Path, robot: RobotConfig, read_table=_read_table) -> Ranges:
 
 def _read_gps(p: Path, robot: RobotConfig, read_table=_read_table) -> Gps:
     cols = header_of(p)
+    if ("lat" in cols or "lon" in cols) and ("x" in cols or "y" in cols):
+        line = next((n for n, raw in text_lines(read_text(p)) if raw.strip() and not raw.strip().startswith("#")), None)
+        raise LogFormatError(p, "has both x,y and lat,lon columns: keep the one to use (LOG_FORMAT.md)", line)
     if "lat" in cols or "lon" in cols:
         c = read_table(p, ("t", "lat", "lon"), optional=("sigma",))
         if len(c["t"]) == 0:
