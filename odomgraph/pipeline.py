@@ -111,7 +111,9 @@ def _estimate_checked(log: Log, method: Method, schedule: Schedule, progress, op
         from odomgraph.analysis.timing import gps_offset_warnings
         suspect += gps_offset_warnings(log, est)
     from odomgraph.analysis.gyrotiming import gyro_offset_warnings
-    suspect += gyro_offset_warnings(log) + _gap_warnings(est, log, options) + _revision_warnings(est)
+    from odomgraph.analysis.wheelgaps import lost_tick_warnings
+    suspect += (gyro_offset_warnings(log) + _gap_warnings(est, log, options) + _revision_warnings(est)
+                + lost_tick_warnings(log))
     est.warnings += [w for w in suspect if w not in est.warnings] + _window_warnings(est, log, schedule)
     est.flags += suspect
     _note_motion_scales(est, log, motion)
