@@ -840,16 +840,14 @@ def _check_stream_outputs(checkpoint: Path | None, history: Path | None, inputs:
     the replayed log, robot.toml, the checkpoint resumed from)."""
     from odomgraph.errors import OutputDirError
     from odomgraph.io.estimate import is_states_file
-    from odomgraph.io.outdir import check_output
+    from odomgraph.io.outdir import check_output, check_output_file
     from odomgraph.online import Online
     if checkpoint is not None:
         check_output(checkpoint, inputs[:2], directory=False)
         if checkpoint.exists() and not Online.is_checkpoint(checkpoint):
             raise OutputDirError(f"{checkpoint}: exists and is not an odomgraph checkpoint; choose another file")
     if history is not None:
-        check_output(history, (*inputs, checkpoint), directory=False)
-        if history.exists() and not is_states_file(history):
-            raise OutputDirError(f"{history}: exists and was not written by odomgraph; choose another output file")
+        check_output_file(history, (*inputs, checkpoint), is_ours=is_states_file)
 
 
 @app.command("import")

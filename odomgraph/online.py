@@ -45,6 +45,7 @@ keeps the isam2 run's fully smoothed estimate in ``final``.
 from __future__ import annotations
 
 import bisect
+import contextlib
 import heapq
 import math
 import os
@@ -660,10 +661,17 @@ class Online:
         else:
             data = {"format": "odomgraph-online-1", "args": self._args, "journal": self.journal,
                     "lines_read": self.lines_read}
-        tmp = path.with_name(path.name + ".tmp")
-        with open(tmp, "wb") as f:
-            pickle.dump(data, f, protocol=pickle.HIGHEST_PROTOCOL)
-        os.replace(tmp, path)
+        # a fresh temporary beside it (never a name a user's file may have)
+        import tempfile
+        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.tmp-", dir=path.parent)
+        try:
+            with os.fdopen(fd, "wb") as f:
+                pickle.dump(data, f, protocol=pickle.HIGHEST_PROTOCOL)
+            os.replace(tmp, path)
+        except BaseException:
+            with contextlib.suppress(OSError):
+                os.unlink(tmp)
+            raise
 
     @staticmethod
     def is_checkpoint(path: Path | str) -> bool:

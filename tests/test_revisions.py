@@ -42,7 +42,7 @@ def test_a_jump_beyond_its_sigma_is_said_with_its_size():
     assert len(out) == 1 and out[0].startswith("fixed-lag: 1 time(s) from t=5.8 to 6.0 s")
     beyond = np.hypot(10.0, 0.2) - 0.2
     assert f"at most {beyond:.1f} m beyond it" in out[0]
-    assert f"{beyond / np.hypot(0.5, 0.5):.0f} sigma" in out[0] and out[0].endswith("not trustworthy there")
+    assert f"{beyond / np.hypot(0.5, 0.5):.0f} sigma" in out[0] and out[0].endswith("not trustworthy")
     assert REVISION_SIGMAS == 6.0
 
 
@@ -93,3 +93,10 @@ def test_weak_fixes_with_honest_rows_say_nothing(seed, method):
     rows = est.online if method == "isam2" else est
     assert _far_rows(log, rows) == 0
     assert not [w for w in est.warnings if "landed further" in w], est.warnings
+
+
+def test_calibrate_refuses_a_run_whose_rows_jumped():
+    from odomgraph.estimators.schedule import Schedule
+    from odomgraph.pipeline import Method, calibrate
+    _, rep = calibrate(_weak_yard(91), Schedule(20.0), Method.fixed_lag, tune=False, fit_noise=False)
+    assert any("landed further from the one before" in w for w in rep["problems"]), rep["problems"]

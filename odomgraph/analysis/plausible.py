@@ -180,4 +180,4 @@ def revision_warnings(name: str, t: np.ndarray, mean: np.ndarray, sigma: np.ndar
     return [f"{name}: {bad.size} time(s) from t={float(t[bad[0]]):.1f} to {float(t[bad[-1] + 1]):.1f} s a row "
             f"landed further from the one before than the robot could drive (at most {float(beyond[worst]):.1f} m "
             f"beyond it, {float(z[worst]):.0f} sigma of the row before; allowed {REVISION_SIGMAS:g}): the rows before "
-            "such a jump were far off at a small sigma; not trustworthy there"]
+            "such a jump were far off at a small sigma there; not trustworthy"]

@@ -18,8 +18,10 @@ from odomgraph.estimators.measurements import GAP_FACTOR
 
 #: A wheel gap is at least this long [s] (and GAP_FACTOR median intervals).
 MIN_GAP = 1.0
-#: Fixes within this long [s] before and after the gap give its ends' positions.
+#: Fixes within this long [s] before and after the gap give its ends'
+#: positions, at least MIN_FIXES each side (one outlier is no end).
 EDGE = 2.0
+MIN_FIXES = 2
 #: The fixes' distance must exceed the wheels' by this many sigma of it...
 N_SIGMA = 4.0
 #: ...by this share of the wheels' own travel, and by this much [m].
@@ -31,7 +33,10 @@ def lost_tick_warnings(log) -> list[str]:
     """One line per encoder gap (MIN_GAP s and GAP_FACTOR median intervals
     or longer) over which the GPS fixes either side moved further than the
     wheels counted, beyond N_SIGMA of the fixes' noise, the lever arm's
-    swing, REL of the travel and MIN_SHORTFALL; [] without encoders or GPS."""
+    swing, REL of the travel and MIN_SHORTFALL; [] without encoders or GPS.
+    The wheels' count is each row's net travel (a row's ticks are summed
+    over its interval, so a reversal inside one cancels): a gap across which
+    the robot drove the other way is left out."""
     e, g = log.encoders, log.gps
     if e is None or g is None or len(e.t) < 3 or len(g.t) < 2:
         return []
@@ -42,16 +47,18 @@ def lost_tick_warnings(log) -> list[str]:
         return []
     sig = g.sigma if g.sigma is not None else np.full(len(g.t), r.gps_sigma)
     lever = float(np.hypot(*r.gps_lever_arm))
-    # the wheels' path length up to each row [m] (its own ticks, nominal ticks/m)
-    step = 0.5 * np.abs(e.ticks_left[1:] / r.ticks_per_meter_left + e.ticks_right[1:] / r.ticks_per_meter_right)
-    path = np.concatenate([[0.0], np.cumsum(step)])
+    # each row's net travel [m] (nominal ticks/m), and its sum from the first row
+    net = 0.5 * (e.ticks_left[1:] / r.ticks_per_meter_left + e.ticks_right[1:] / r.ticks_per_meter_right)
+    path = np.concatenate([[0.0], np.cumsum(np.abs(net))])
     out = []
     for i in gap:
         a, b = float(e.t[i]), float(e.t[i + 1])
         before = (g.t >= a - EDGE) & (g.t <= a)
         after = (g.t >= b) & (g.t <= b + EDGE)
-        if not before.any() or not after.any():
+        if before.sum() < MIN_FIXES or after.sum() < MIN_FIXES:
             continue
+        if i >= 1 and i + 1 < len(net) and net[i - 1] * net[i + 1] < 0:
+            continue                                  # it drove the other way after: a reversal inside may cancel
         # each end: the fixes' median place and time; the wheels over the same span
         t0, t1 = float(np.median(g.t[before])), float(np.median(g.t[after]))
         p0 = np.array([np.median(g.x[before]), np.median(g.y[before])])

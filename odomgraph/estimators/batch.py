@@ -556,7 +556,7 @@ def keyframe_rows(prob: Problem, pose: np.ndarray, W: np.ndarray, Sig: np.ndarra
         # d pose_mid / d block: body-frame pose columns and (v, omega).
         J = np.zeros((len(k), 3, NB))
         J[:, :, 0:3] = pose2.to_body(Jf[:, :, 0:3], pose[k, 2])
-        J[:, :, 3:5] = Jf[:, :, 3:5]
+        J[:, :, S.VEL_S] = Jf[:, :, S.VEL_S]          # the step's columns are the state's first five
         pose_cov = J @ Sig[k] @ np.swapaxes(J, 1, 2)
         sigma[:, 0:3] = np.sqrt(np.maximum(np.diagonal(pose_cov, 0, 1, 2), 0))
         sigma[:, 3:] = np.sqrt(np.maximum(np.diagonal(Sig[k], 0, 1, 2)[:, 3:], 0))

@@ -786,7 +786,7 @@ class ISAM2Runner(_Runner):
         Ps = isam.marginalCovariance(S_KEY(k - 1))
         # pose at the midpoint: arc Jacobian on X (body) and (v, omega); cross terms ignored
         Jx = pose2.to_body(Jf[:, 0:3], self.pose[k - 1, 2])
-        Jv = Jf[:, 3:5]
+        Jv = Jf[:, St.VEL_S]
         Pp = Jx @ Px @ Jx.T + Jv @ Pw[0:2, 0:2] @ Jv.T
         self.online_sigma[k, 0:3] = np.sqrt(np.maximum(np.diag(Pp), 0))
         self.online_sigma[k, [3, 4, 5, 8, 9, 10]] = np.sqrt(np.maximum(np.diag(Pw), 0))

@@ -13,6 +13,10 @@ from odomgraph.io.csvtable import read_table, stamp_text, write_table
 from odomgraph.io.outdir import atomic_output_dir
 
 
+#: states.csv's header, in order (LOG_FORMAT.md).
+STATES_HEADER = ("t",) + S.NAMES + tuple(f"sigma_{n}" for n in S.NAMES)
+
+
 def states_columns(est: Estimate) -> dict[str, np.ndarray]:
     """states.csv's columns; ``t`` as the absolute stamps' text (Estimate.t_origin)."""
     cols = {"t": stamp_text(est.t, est.t_origin)}
@@ -22,7 +26,7 @@ def states_columns(est: Estimate) -> dict[str, np.ndarray]:
 
 
 def write_states(path: Path, est: Estimate) -> None:
-    write_table(path, states_columns(est), {k: "%.9g" for k in S.NAMES + tuple(f"sigma_{n}" for n in S.NAMES)})
+    write_table(path, states_columns(est), {k: "%.9g" for k in STATES_HEADER[1:]})
 
 
 def is_states_file(path: Path) -> bool:
@@ -30,14 +34,9 @@ def is_states_file(path: Path) -> bool:
     header line), so that writing one never replaces another kind of file."""
     from odomgraph.io.csvtable import header_of
     try:
-        return tuple(header_of(Path(path))) == tuple(states_columns_names())
+        return tuple(header_of(Path(path))) == STATES_HEADER
     except (OSError, LogFormatError, ValueError):
         return False
-
-
-def states_columns_names() -> tuple[str, ...]:
-    """states.csv's header, in order."""
-    return ("t",) + S.NAMES + tuple(f"sigma_{n}" for n in S.NAMES)
 
 
 def _tum_lines(t_text, x, y, theta) -> str:

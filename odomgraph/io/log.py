@@ -73,8 +73,8 @@ class SensorFile:
     """One sensor's file of LOG_FORMAT.md. ``SENSOR_FILES`` is the one table
     that reading and writing a log, the stream's line format (io.stream) and
     the live estimator's buffers (odomgraph.online) read: a sensor whose
-    columns are plain numbers needs its dataclass and a line there, nothing
-    more, to be read, written and streamed."""
+    columns are plain numbers needs its dataclass, its ``Log`` field and a
+    line there, nothing more, to be read, written and streamed."""
     name: str
     """The Log field, the file's stem and a stream line's first word."""
     cls: type

@@ -237,15 +237,20 @@ def atomic_output_dir(path: Path | str, inputs=(), kind: str = "output"):
         raise
 
 
-@contextlib.contextmanager
-def atomic_output_file(path: Path | str, inputs=(), is_ours=lambda p: False):
-    """Context manager yielding a temporary file path that becomes ``path``.
-
-    An existing file is replaced only if ``is_ours(path)`` says odomgraph wrote it.
-    """
+def check_output_file(path: Path | str, inputs=(), is_ours=lambda p: False) -> Path:
+    """check_output for a file: besides, an existing file is replaced only
+    if ``is_ours(path)`` says odomgraph wrote it. Returns the path."""
     path = check_output(path, inputs, directory=False)
     if path.exists() and not is_ours(path):
         raise OutputDirError(f"{path}: exists and was not written by odomgraph; choose another output file")
+    return path
+
+
+@contextlib.contextmanager
+def atomic_output_file(path: Path | str, inputs=(), is_ours=lambda p: False):
+    """Context manager yielding a temporary file path that becomes ``path``
+    (check_output_file first)."""
+    path = check_output_file(path, inputs, is_ours)
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
         clean_stale(path.parent, path.name)

@@ -21,8 +21,8 @@ from typing import Iterator
 
 import numpy as np
 
-from odomgraph import state as S
 from odomgraph.io.csvtable import stamp_text
+from odomgraph.io.estimate import STATES_HEADER
 from odomgraph.io.log import SENSOR_FILES, Log
 
 #: Each sensor's values on a line, in order: its LOG_FORMAT.md columns after
@@ -31,7 +31,7 @@ from odomgraph.io.log import SENSOR_FILES, Log
 SENSOR_COLUMNS = {sf.name: sf.columns for sf in SENSOR_FILES}
 
 #: states.csv's header line.
-HEADER = ",".join(("t",) + S.NAMES + tuple(f"sigma_{n}" for n in S.NAMES))
+HEADER = ",".join(STATES_HEADER)
 
 
 class LineError(ValueError):

@@ -379,6 +379,10 @@ def import_rosbag(bag: Path | str, wheel_topic: str | None = None, left_joint: s
                             il, ir = names.index(joints[0]), names.index(joints[1])
                         pos = np.asarray(msg.position, float)
                         vel = np.asarray(msg.velocity, float)
+                        used = pos[[il, ir]] if pos.size else (vel[[il, ir]] if vel.size else np.zeros(2))
+                        if not np.all(np.isfinite(used)):
+                            not_finite[conn.topic] = not_finite.get(conn.topic, 0) + 1
+                            continue
                         wheels.append((stamp, *(pos[[il, ir]] if pos.size else (np.nan, np.nan)),
                                        *(vel[[il, ir]] if vel.size else (np.nan, np.nan))))
                     else:
