@@ -45,10 +45,8 @@ keeps the isam2 run's fully smoothed estimate in ``final``.
 from __future__ import annotations
 
 import bisect
-import contextlib
 import heapq
 import math
-import os
 import pickle
 import time
 from dataclasses import dataclass, field
@@ -661,17 +659,11 @@ class Online:
         else:
             data = {"format": "odomgraph-online-1", "args": self._args, "journal": self.journal,
                     "lines_read": self.lines_read}
-        # a fresh temporary beside it (never a name a user's file may have)
-        import tempfile
-        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.tmp-", dir=path.parent)
-        try:
-            with os.fdopen(fd, "wb") as f:
+        # through a fresh temporary beside it; only a checkpoint is ever replaced
+        from odomgraph.io.outdir import atomic_output_file
+        with atomic_output_file(path, is_ours=Online.is_checkpoint) as tmp:
+            with open(tmp, "wb") as f:
                 pickle.dump(data, f, protocol=pickle.HIGHEST_PROTOCOL)
-            os.replace(tmp, path)
-        except BaseException:
-            with contextlib.suppress(OSError):
-                os.unlink(tmp)
-            raise
 
     @staticmethod
     def is_checkpoint(path: Path | str) -> bool:

@@ -91,6 +91,23 @@ def test_stream_files_never_replace_an_input_or_a_users_file(log_in_project, mon
     assert snapshot(log_in_project) == before
 
 
+def test_the_library_checkpoint_never_replaces_a_users_file(tmp_path, short_log):
+    """Online.save goes through io.outdir: a user's file (or a NAME.tmp beside
+    it) survives, and a checkpoint replaces a checkpoint."""
+    from odomgraph.errors import OutputDirError
+    from odomgraph.online import Online
+    live = Online(read_log(short_log).robot, "ekf")
+    (tmp_path / "notes.txt").write_text("field notes\n")
+    (tmp_path / "ck.tmp").write_text("mine\n")
+    with pytest.raises(OutputDirError, match="not written by odomgraph"):
+        live.save(tmp_path / "notes.txt")
+    live.save(tmp_path / "ck")
+    live.save(tmp_path / "ck")
+    assert (tmp_path / "notes.txt").read_text() == "field notes\n" and (tmp_path / "ck.tmp").read_text() == "mine\n"
+    assert Online.is_checkpoint(tmp_path / "ck")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["ck", "ck.tmp", "notes.txt"]
+
+
 def test_a_stream_checkpoint_replaces_its_own_and_the_history_its_own(log_in_project, monkeypatch):
     monkeypatch.chdir(log_in_project)
     for _ in range(2):                  # the second run replaces both files the first wrote
