@@ -8,6 +8,8 @@ memory (VmHWM) is its own; the process's peak before the read (odomgraph and
 numpy imported) is subtracted. The peer is
 ``numpy.loadtxt`` reading the same CSV files (header skipped), named and
 timed in the same run, so the ratio holds whatever else the machine does.
+Two reads: ``read`` as an estimator reads a log (truth.csv is read on first
+use, so not at all), ``read-truth`` as a scoring tool reads it (every file).
 Targets (issue 17): at least 50 MB/s, peak memory at most 3x the files.
 
 python -m benchmarks.log_io [--minutes 10 30 60]
@@ -39,15 +41,12 @@ def hwm():
 
 base = hwm()
 t0 = time.perf_counter()
-if what == "read":
+if what == "read":                    # as an estimator reads a log: truth.csv is left unread
     log = L.read_log(d)
-elif what == "read-no-truth":
-    for f in ("truth.csv",):
-        (d / f).rename(d / (f + ".aside"))
-    try:
-        log = L.read_log(d)
-    finally:
-        (d / "truth.csv.aside").rename(d / "truth.csv")
+    assert not log.truth.loaded
+elif what == "read-truth":            # as a scoring tool reads it: every file
+    log = L.read_log(d)
+    log.truth.values
 elif what == "loadtxt":
     for f in sorted(d.glob("*.csv")):
         np.loadtxt(f, delimiter=",", skiprows=1, ndmin=2)
@@ -91,7 +90,7 @@ def main(argv=None) -> None:
             row = {"minutes": minutes, "log_bytes": log_bytes, "truth_bytes": truth_bytes,
                    "states_bytes": sizes["states.csv"]}
             (d / "states.csv").rename(Path(tmp) / "states.csv")
-            for what in ("read", "read-no-truth", "loadtxt"):
+            for what in ("read", "read-truth", "loadtxt"):
                 row[what] = _measure(what, d)
             (Path(tmp) / "states.csv").rename(d / "states.csv")
             row["write-states"] = _measure("write-states", d)
@@ -99,25 +98,36 @@ def main(argv=None) -> None:
             print(json.dumps(row), flush=True)
     lines = ["# Log I/O (issue 17)", "",
              "Each cell is one process; peak memory is its VmHWM less that before the read "
-             "(odomgraph and numpy imported). The peer is `numpy.loadtxt` on the same CSV files.", "",
-             "| log | files | read | MB/s | peak over files | without truth.csv | numpy.loadtxt | MB/s | "
-             "read ÷ loadtxt | write states.csv |", "|---|---|---|---|---|---|---|---|---|---|"]
+             "(odomgraph and numpy imported). *Sensors*: `read_log` as an estimator calls it (truth.csv is "
+             "read on first use, so not at all); *every file*: then the truth read too, as a scoring tool "
+             "does. The peer is `numpy.loadtxt` on the same CSV files (every file).", "",
+             "| log | files | sensors: read | MB/s | peak over files | every file: read | MB/s | peak over files "
+             "| numpy.loadtxt | MB/s | read ÷ loadtxt | write states.csv |",
+             "|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for r in runs:
-        mb = r["log_bytes"] / 1e6
-        rd, nt, lt, ws = r["read"], r["read-no-truth"], r["loadtxt"], r["write-states"]
-        extra = (rd["peak_kb"] - rd["base_kb"]) * 1024 / r["log_bytes"]
+        mb, smb = r["log_bytes"] / 1e6, (r["log_bytes"] - r["truth_bytes"]) / 1e6
+        rd, rt, lt, ws = r["read"], r["read-truth"], r["loadtxt"], r["write-states"]
+        s_extra = (rd["peak_kb"] - rd["base_kb"]) * 1024 / (r["log_bytes"] - r["truth_bytes"])
+        extra = (rt["peak_kb"] - rt["base_kb"]) * 1024 / r["log_bytes"]
         lines.append(f"| {r['minutes']:g} min | {mb:.1f} MB (truth {r['truth_bytes'] / 1e6:.1f}) | "
-                     f"{rd['wall_s']:.2f} s | {mb / rd['wall_s']:.0f} | {extra:.1f}x | {nt['wall_s']:.2f} s | "
-                     f"{lt['wall_s']:.2f} s | {mb / lt['wall_s']:.0f} | {rd['wall_s'] / lt['wall_s']:.1f}× | "
-                     f"{ws['wall_s']:.2f} s "
-                     f"({r['states_bytes'] / 1e6:.1f} MB) |")
+                     f"{rd['wall_s']:.2f} s | {smb / rd['wall_s']:.0f} | {s_extra:.1f}x | "
+                     f"{rt['wall_s']:.2f} s | {mb / rt['wall_s']:.0f} | {extra:.1f}x | "
+                     f"{lt['wall_s']:.2f} s | {mb / lt['wall_s']:.0f} | {rt['wall_s'] / lt['wall_s']:.2f}× | "
+                     f"{ws['wall_s']:.2f} s ({r['states_bytes'] / 1e6:.1f} MB) |")
     last = runs[-1]
-    speed = last["log_bytes"] / 1e6 / last["read"]["wall_s"]
-    extra = (last["read"]["peak_kb"] - last["read"]["base_kb"]) * 1024 / last["log_bytes"]
-    lines += ["", f"Targets (issue 17): read at 50 MB/s or more ({'met' if speed >= 50 else 'missed'}: "
-                  f"{speed:.0f} MB/s on the longest log), peak memory at most 3x the files "
-                  f"({'met' if extra <= 3 else 'missed'}: {extra:.1f}x); `read_log` reads truth.csv, which no "
-                  "estimator uses, on every run."]
+    speed = min(last["log_bytes"] / 1e6 / last["read-truth"]["wall_s"],
+                (last["log_bytes"] - last["truth_bytes"]) / 1e6 / last["read"]["wall_s"])
+    extra = max((last["read-truth"]["peak_kb"] - last["read-truth"]["base_kb"]) * 1024 / last["log_bytes"],
+                (last["read"]["peak_kb"] - last["read"]["base_kb"]) * 1024
+                / (last["log_bytes"] - last["truth_bytes"]))
+    lines += ["", f"Targets (issue 17), the worse of the two reads on the longest log: read at 50 MB/s or more "
+                  f"({'met' if speed >= 50 else 'missed'}: {speed:.0f} MB/s), peak memory at most 3x the files "
+                  f"({'met' if extra <= 3 else 'missed'}: {extra:.1f}x). An estimator does not read truth.csv "
+                  f"({last['truth_bytes'] / 1e6:.0f} of the {last['log_bytes'] / 1e6:.0f} MB here).",
+              "", "How: each file is parsed by `numpy.loadtxt` in chunks of 256 KiB of text into one preallocated "
+                  "(columns, rows) array, each column a view of it (`io/csvtable.py`); only a file that is not "
+                  "plain numbers (comments or blank lines among the rows, a bad value) is read row by row, to "
+                  "name the line."]
     save("log_io", {"runs": runs, "targets": {"mb_per_s": 50.0, "peak_over_files": 3.0}}, "\n".join(lines))
 
 

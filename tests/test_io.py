@@ -167,3 +167,38 @@ def test_write_log_is_atomic(tmp_path, paper_log, monkeypatch):
         write_log(paper_log, target)
     assert not target.exists()
     assert list(tmp_path.iterdir()) == []
+
+
+def test_truth_is_read_on_first_use_and_its_errors_name_the_line(log_copy, paper_log):
+    """An estimator never reads truth.csv (issue 17): read_log checks its
+    header only; its rows, and their clock, are read when a scoring tool
+    first asks, and a bad row is then refused as any file's is."""
+    read_log(log_copy)                                   # the copy reads clean
+    replace_line(log_copy / "truth.csv", 40, "1.0,abc,2.0,0,0,0,0,0,0")
+    log = read_log(log_copy)
+    assert log.truth is not None and not log.truth.loaded
+    assert log.encoders is not None and not log.truth.loaded   # the sensors do not touch it
+    with pytest.raises(LogFormatError, match=r"truth\.csv:40: column 'x': 'abc' is not a number"):
+        log.truth.t
+
+
+def test_truth_header_is_checked_as_the_log_is_read(log_copy):
+    (log_copy / "truth.csv").write_text("t,x\n0.0,1.0\n")
+    expect_error(log_copy, "truth.csv", "missing column(s) y")
+
+
+def test_truth_on_another_clock_is_refused_when_read(log_copy):
+    text = (log_copy / "truth.csv").read_text().splitlines()
+    rows = [text[0]] + [",".join([f"{float(r.split(',')[0]) * 1000:.3f}", *r.split(",")[1:]]) for r in text[1:]]
+    (log_copy / "truth.csv").write_text("\n".join(rows) + "\n")
+    log = read_log(log_copy)
+    with pytest.raises(LogFormatError, match=r"truth\.csv.*(share one clock|not seconds)"):
+        log.truth.values
+
+
+def test_truth_read_late_equals_truth_written(paper_log, paper_log_dir):
+    back = read_log(paper_log_dir)
+    np.testing.assert_allclose(back.truth.t, paper_log.truth.t, atol=1e-6)
+    assert back.truth.values.keys() == paper_log.truth.values.keys()
+    cut = back.truncated(30.0)
+    assert cut.truth.t[-1] <= 30.0 and len(cut.truth.values["x"]) == len(cut.truth.t)

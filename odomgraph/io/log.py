@@ -118,11 +118,37 @@ SENSOR_FILE = {s.name: s for s in SENSOR_FILES}
 TRUTH_COLUMNS = ("x", "y", "theta", "v", "omega", "slip_left", "slip_right", "gyro_bias")
 
 
-@dataclass(frozen=True)
 class Truth:
-    """truth.csv: ``values`` maps each present column of TRUTH_COLUMNS to its array."""
-    t: np.ndarray
-    values: dict[str, np.ndarray]
+    """truth.csv: ``t`` (N,) [s] and ``values``, each present column of
+    TRUTH_COLUMNS as an (N,) array (x, y [m], theta [rad], ...).
+
+    Only the tools that score against the truth use it, so ``read_log`` reads
+    truth.csv on first use (``Truth.file``), not with the sensors: an
+    estimator never pays for it (an hour at 100 Hz is 40 MB of text)."""
+
+    def __init__(self, t: np.ndarray, values: dict[str, np.ndarray]):
+        self._t, self._values, self._load = t, values, None
+
+    @classmethod
+    def file(cls, load) -> "Truth":
+        """A Truth whose (t, values) ``load()`` gives when first asked for."""
+        out = cls(None, None)
+        out._load = load
+        return out
+
+    def _loaded(self):
+        if self._load is not None:
+            self._t, self._values = self._load()
+            self._load = None
+        return self._t, self._values
+
+    @property
+    def t(self) -> np.ndarray:
+        return self._loaded()[0]
+
+    @property
+    def values(self) -> dict[str, np.ndarray]:
+        return self._loaded()[1]
 
     def at(self, name: str, t: np.ndarray) -> np.ndarray | None:
         """Column ``name`` linearly interpolated at times t (None if absent).
@@ -134,6 +160,15 @@ class Truth:
             from odomgraph.factors._math import wrap_angle
             return wrap_angle(np.interp(t, self.t, th))
         return np.interp(t, self.t, self.values[name])
+
+    @property
+    def loaded(self) -> bool:
+        """Whether the rows have been read (see ``file``)."""
+        return self._load is None
+
+    def cut(self, keep: np.ndarray) -> "Truth":
+        """The rows where ``keep`` (N,) is true."""
+        return Truth(self.t[keep], {k: v[keep] for k, v in self.values.items()})
 
 
 @dataclass(frozen=True)
@@ -179,9 +214,9 @@ class Log:
             if obj is None:
                 return None
             keep = obj.t <= t_end
-            kw = {k: (v[keep] if isinstance(v, np.ndarray) else v) for k, v in obj.__dict__.items()}
             if isinstance(obj, Truth):
-                kw["values"] = {k: v[keep] for k, v in obj.values.items()}
+                return obj.cut(keep)
+            kw = {k: (v[keep] if isinstance(v, np.ndarray) else v) for k, v in obj.__dict__.items()}
             return type(obj)(**kw)
         return replace(self, **{k: cut(getattr(self, k)) for k in (*SENSOR_FILE, "truth")})
 
@@ -228,8 +263,10 @@ def read_log(directory: Path | str) -> Log:
             read[sf.name] = (_SPECIAL_READERS[sf.name](p, robot, read_table) if sf.name in _SPECIAL_READERS
                              else _read_plain(sf, p, read_table))
     if (p := _optional(d / "truth.csv")):
-        c = read_table(p, ("t", "x", "y"), optional=TRUTH_COLUMNS[2:])
-        truth = Truth(c["t"], {k: c[k] for k in TRUTH_COLUMNS if k in c})
+        wheel = read.get("encoders", read.get("wheel_speeds"))
+        o = origin[0] if origin else 0
+        span = (float(wheel.t[0]) + o, float(wheel.t[-1]) + o) if wheel is not None and len(wheel.t) else None
+        truth = _truth_file(p, read_table, o, span)
     scales = None
     if (p := _optional(d / "truth.toml")):
         try:
@@ -250,6 +287,24 @@ def read_log(directory: Path | str) -> Log:
               t_origin=origin[0] if origin else 0)
     check_log(log)
     return log
+
+
+def _truth_file(p: Path, read_table, origin: int, span: tuple[float, float] | None) -> Truth:
+    """truth.csv, read when first used (see Truth). Its header is checked
+    now, so that a log without the truth's columns is refused as it is read;
+    the rows, and their clock against the wheels' (``span``, as written [s];
+    check_clock), when read. ``origin``: the log's t_origin."""
+    header = header_of(p)
+    missing = [c for c in ("t", "x", "y") if c not in header]
+    if missing:
+        raise LogFormatError(p, f"missing column(s) {', '.join(missing)} (header is "
+                                f"'{shown(','.join(header), 80)}')")
+
+    def load():
+        c = read_table(p, ("t", "x", "y"), optional=TRUTH_COLUMNS[2:])
+        _check_file_clock(p, c["t"] + origin, span)
+        return c["t"], {k: c[k] for k in TRUTH_COLUMNS if k in c}
+    return Truth.file(load)
 
 
 def check_log(log: Log) -> None:
@@ -351,26 +406,10 @@ def check_clock(log: Log) -> None:
     allocation of hundreds of GiB. Checks, each naming the likely unit:
     absolute stamps beyond MAX_ABS_TIME, a log longer than MAX_DURATION, a
     median wheel interval beyond MAX_WHEEL_INTERVAL, and a sensor file whose
-    times do not overlap the wheels' (a different clock).
+    times do not overlap the wheels' (a different clock). A truth.csv not
+    read yet is checked when it is (``_truth_file``).
     """
     d = log.path or Path(".")
-    spans = {}
-    for key, name in _FILES.items():
-        obj = getattr(log, key)
-        if obj is None or len(obj.t) == 0:
-            continue
-        t = obj.t + log.t_origin  # the messages name the stamps as written
-        big = np.abs(t) > MAX_ABS_TIME
-        if big.any():
-            k = int(np.argmax(big))
-            v = float(t[k])
-            raise LogFormatError(d / name, f"time stamp {v:.4g} is not seconds{_unit_guess(abs(v), 1e8, 1e10)} "
-                                           "(LOG_FORMAT.md: t is in seconds)", _line_of_row(d / name, k))
-        spans[key] = (float(t[0]), float(t[-1]))
-        if t[-1] - t[0] > MAX_DURATION:
-            step = float(np.median(np.diff(t))) if len(t) > 1 else None
-            raise LogFormatError(d / name, f"spans {t[-1] - t[0]:.4g} s, more than a year: the time stamps are "
-                                           f"not seconds{_unit_guess(t[-1] - t[0], 1.0, MAX_DURATION, step)}")
     wheel = "encoders" if log.encoders is not None else "wheel_speeds"
     wt = getattr(log, wheel).t
     if len(wt) > 1:
@@ -379,19 +418,46 @@ def check_clock(log: Log) -> None:
             raise LogFormatError(d / _FILES[wheel], f"median sample interval is {med:.4g} s, implausible for "
                                                    f"wheel odometry{_unit_guess(med, 1e-4, MAX_WHEEL_INTERVAL)} "
                                                    "(LOG_FORMAT.md: t is in seconds)")
-    if wheel not in spans:
-        return
-    w0, w1 = spans[wheel]
-    for key, (s0, s1) in spans.items():
-        if key == wheel:
+    span = _wheel_span(log)
+    for key, name in _FILES.items():
+        obj = getattr(log, key)
+        if obj is None or (isinstance(obj, Truth) and not obj.loaded):
             continue
-        if s1 < w0 or s0 > w1:
-            raise LogFormatError(d / _FILES[key], f"its times ({s0:.6g} to {s1:.6g} s) do not overlap the wheel "
-                                                  f"odometry's ({w0:.6g} to {w1:.6g} s): the files of a log share "
-                                                  "one clock", _line_of_row(d / _FILES[key], 0))
-        if s1 - s0 > 10 * (w1 - w0) + 60:
-            raise LogFormatError(d / _FILES[key], f"spans {s1 - s0:.4g} s, the wheel odometry only {w1 - w0:.4g} s: "
-                                                  "the files of a log share one clock and unit (seconds)")
+        _check_file_clock(d / name, obj.t + log.t_origin, span if key != wheel else None)
+
+
+def _wheel_span(log: Log) -> tuple[float, float] | None:
+    """(first, last) wheel stamp as written [s], None without rows."""
+    wt = (log.encoders if log.encoders is not None else log.wheel_speeds).t
+    return (float(wt[0]) + log.t_origin, float(wt[-1]) + log.t_origin) if len(wt) else None
+
+
+def _check_file_clock(p: Path, t: np.ndarray, wheel_span: tuple[float, float] | None) -> None:
+    """check_clock for one file's stamps ``t`` (as written [s]) against the
+    wheels' (first, last) stamps (None: this is the wheels' file)."""
+    if len(t) == 0:
+        return
+    big = np.abs(t) > MAX_ABS_TIME
+    if big.any():
+        k = int(np.argmax(big))
+        v = float(t[k])
+        raise LogFormatError(p, f"time stamp {v:.4g} is not seconds{_unit_guess(abs(v), 1e8, 1e10)} "
+                                "(LOG_FORMAT.md: t is in seconds)", _line_of_row(p, k))
+    s0, s1 = float(t[0]), float(t[-1])
+    if s1 - s0 > MAX_DURATION:
+        step = float(np.median(np.diff(t))) if len(t) > 1 else None
+        raise LogFormatError(p, f"spans {s1 - s0:.4g} s, more than a year: the time stamps are "
+                                f"not seconds{_unit_guess(s1 - s0, 1.0, MAX_DURATION, step)}")
+    if wheel_span is None:
+        return
+    w0, w1 = wheel_span
+    if s1 < w0 or s0 > w1:
+        raise LogFormatError(p, f"its times ({s0:.6g} to {s1:.6g} s) do not overlap the wheel "
+                                f"odometry's ({w0:.6g} to {w1:.6g} s): the files of a log share "
+                                "one clock", _line_of_row(p, 0))
+    if s1 - s0 > 10 * (w1 - w0) + 60:
+        raise LogFormatError(p, f"spans {s1 - s0:.4g} s, the wheel odometry only {w1 - w0:.4g} s: "
+                                "the files of a log share one clock and unit (seconds)")
 
 
 def _read_plain(sf: SensorFile, p: Path, read_table):
