@@ -66,7 +66,7 @@ def test_the_gain_has_no_component_along_the_common_scale():
         ekf.step(t_ev[k], int(code_ev[k]), *event_values(ekf.meas, int(code_ev[k]), row_ev[k]))
         k += 1
     ekf.predict(t_ev[k])
-    z, s = event_values(ekf.meas, WHEEL, row_ev[k])
+    z, s, _ = event_values(ekf.meas, WHEEL, row_ev[k])
     x0, P0 = ekf.x.copy(), ekf.P.copy()
     # an innovation well off the prediction, so that every gain shows
     h, H = encoder.wheel_speeds(*x0[[3, 4, 6, 7, 8, 9, 10]], log.robot.track_width)

@@ -70,7 +70,10 @@ def written(log, d: Path):
     """The log as a user would have it: written and read back."""
     from odomgraph.io.log import read_log, write_log
     write_log(log, d)
-    return read_log(d)
+    back = read_log(d)
+    if back.truth is not None:
+        back.truth.values       # read now: truth.csv is read on first use, and d may be gone by then
+    return back
 
 
 def _window_rms(err, name_x: str, name_y: str | None, t0: float, t1: float) -> float | None:

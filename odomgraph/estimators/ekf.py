@@ -33,7 +33,7 @@ from odomgraph.checks import bounded, check_fields
 from odomgraph.errors import EstimatorDivergedError
 from odomgraph.estimators.heading import HeadingWatch, circle_variance
 from odomgraph.estimators.initial import InitialState, initial_state
-from odomgraph.estimators.measurements import from_log, slip_intensity
+from odomgraph.estimators.measurements import PAUSE_S, from_log, pause_spans, slip_intensity
 from odomgraph.observability import decondition
 from odomgraph.estimators.slipcheck import in_stretches, in_window
 from odomgraph.result import Estimate, Innovations
@@ -50,6 +50,13 @@ _I = np.eye(S.N)
 #: smoothers' first-linearisation gate holds jumps out by the same rule.
 JUMP_SPEED = 3.0
 JUMP_HOLD = 30.0
+
+#: Across a pause the wheels' net travel D (the encoder row that spans it)
+#: carries the pose, but the path's shape is unknown: each position axis gets
+#: this share of D as sigma, the heading this share of the turn (plus a
+#: scale factor's worth of both).
+PAUSE_PATH_SHARE = 0.25
+PAUSE_TURN_SHARE = 0.05
 
 
 def common_scale_direction(x: np.ndarray) -> np.ndarray:
@@ -266,12 +273,18 @@ class EKF:
         self._R_scale = np.eye(3) * pn.pseudo_scale_sigma**2
         self.holding_scale = False
         self.consider_heading = False      # (heading.HeadingWatch: no heading known yet)
+        self.pause_spans = pause_spans(self.meas)              # the log's pauses (measurements.pause_spans)
+        self.pauses: list[tuple[float, float]] = []           # (start, end) [s] of each pause crossed
+        self.pause_travel: list[tuple[float, float, float]] = []  # (t, distance [m], turn [rad]) across them
 
     # ------------------------------------------------------------ predict
     def predict(self, t: float) -> None:
         """Propagate state and covariance to absolute time t (paper eq. 2-7)."""
         dt = t - self.t
         if dt <= 0.0:
+            return
+        if self._in_pause(t):
+            self._pause(t)
             return
         x, P, q = self.x, self.P, self._q
         pose, J = propagate(x[0], x[1], x[2], x[3], x[4], dt)
@@ -282,6 +295,70 @@ class EKF:
         x[0], x[1], x[2] = pose[0], pose[1], wrap_angle(pose[2])
         self.P = P
         self.t = t
+
+    def _in_pause(self, t: float) -> bool:
+        """Whether the step from self.t to t [s] crosses a pause in the log:
+        mostly inside one of ``pause_spans`` (a row spanning it is stamped at
+        its midpoint, and splits it in two steps), or, where those are not
+        known (a stream's measurements grow), a step longer than PAUSE_S."""
+        dt = t - self.t
+        if dt > PAUSE_S:
+            return True
+        return any(min(t, b) - max(self.t, a) > max(0.5 * dt, 0.25 * PAUSE_S) for a, b in self.pause_spans)
+
+    def _pause(self, t: float) -> None:
+        """Cross a pause (no reading of any sensor for more than PAUSE_S; a
+        probe's log paused for an hour: coasting through it at constant
+        velocity moved the mean by v dt and left the heading's sigma at
+        110 rad, and 894 of 1499 fixes after it were rejected) to time t [s].
+
+        The robot is taken to have stood still: the pose is held, and the
+        velocity and the slips start afresh (zero, their starting variances,
+        no correlation with the rest: after a pause the robot may drive off at
+        any speed). The gyro bias and the scale factors keep their random
+        walks over the whole pause. If the wheels did turn meanwhile, the
+        encoder row that spans the pause says how far (``_pause_odometry``);
+        if the robot was moved otherwise, the fixes after the pause show a
+        jump, which the gate holds out and then re-acquires (counted)."""
+        dt = t - self.t
+        x, P, q = self.x, self.P, self._q
+        fresh = [S.V, S.OMEGA] + ([S.SLIP_L, S.SLIP_R] if self.options.slip_states else [])
+        start_var = np.diagonal(self.init.P)[fresh]
+        x[fresh] = 0.0
+        P[fresh, :] = 0.0
+        P[:, fresh] = 0.0
+        P[fresh, fresh] = start_var
+        P[S.BIAS, S.BIAS] += q["bias"] * dt
+        if q["scale"]:
+            P[SCALE_IDX, SCALE_IDX] += np.eye(3) * q["scale"] * dt
+        if self.pauses and self.pauses[-1][1] == self.t:
+            # one event alone between two silences (an encoder row spanning
+            # the pause sits at its midpoint): one pause
+            self.pauses[-1] = (self.pauses[-1][0], t)
+        else:
+            self.pauses.append((self.t, t))
+        self.t = t
+
+    def _pause_odometry(self, z: np.ndarray, interval: float) -> None:
+        """Move the pose by the wheels' travel across a pause: ``z`` (2,) the
+        nominal-converted (left, right) average wheel speeds [m/s] of an
+        encoder row whose ``interval`` [s] spans it (no slip assumed, the
+        current scale factors applied; paper eq. 29 inverted). The arc of
+        the average velocity is exact in length and turn, not in shape:
+        PAUSE_PATH_SHARE and PAUSE_TURN_SHARE give it its sigma."""
+        x, P = self.x, self.P
+        ul, ur = z[0] / x[S.SCALE_L], z[1] / x[S.SCALE_R]
+        v, om = 0.5 * (ul + ur), (ur - ul) / (x[S.SCALE_B] * self.robot.track_width)
+        dist, turn = abs(v) * interval, abs(om) * interval
+        if dist == 0.0 and turn == 0.0:
+            return
+        pose, _ = propagate(x[0], x[1], x[2], v, om, interval)
+        x[0], x[1], x[2] = pose[0], pose[1], wrap_angle(pose[2])
+        scale_sd = float(np.sqrt(np.max(np.diagonal(P)[SCALE_IDX])))
+        P[0, 0] += (PAUSE_PATH_SHARE * dist + scale_sd * dist) ** 2
+        P[1, 1] += (PAUSE_PATH_SHARE * dist + scale_sd * dist) ** 2
+        P[2, 2] += (PAUSE_TURN_SHARE * turn + scale_sd * turn) ** 2
+        self.pause_travel.append((self.t, dist, turn))
 
     # ------------------------------------------------------------- update
     def update(self, z, h, H, idx, R, gate: float | None = None, ref=None, no_gain=None) -> float:
@@ -440,6 +517,13 @@ class EKF:
             if hw.known:
                 self.heading_known_at = hw.t_known
                 self.heading_watch = hw = None
+        if code == WHEEL and len(aux) > 1 and aux[1] > PAUSE_S and self.pauses \
+                and min(t + 0.5 * aux[1], self.pauses[-1][1]) - max(t - 0.5 * aux[1], self.pauses[-1][0]) > 0:
+            # An encoder row spanning a pause: its ticks are the travel across
+            # it, not a speed at its midpoint (see _pause).
+            self._pause_odometry(z, aux[1])
+            self.n_up += 1
+            return float(DOF[WHEEL])      # no innovation: the NIS its expected value
         if code == WHEEL:
             if ((self.switch_sigma is None and self.t_switch is not None and not in_slip)
                     or not self.init.observability.slip_observable):
@@ -586,10 +670,22 @@ class EKF:
         est.recoveries = list(self.recoveries)
         est.held_out = {k: np.asarray(v) for k, v in self.held_t.items()}
         est.warnings += self.window_warnings + self.heading_warnings()
+        est.notes += self.pause_notes()
         for k, v in m.spikes.items():
             est.rejected[k] = est.rejected.get(k, 0) + v
         return est
 
+
+    def pause_notes(self) -> list[str]:
+        """One line per pause crossed (see _pause)."""
+        out = []
+        for a, b in self.pauses:
+            moved = [f"{d:.2f} m, {np.degrees(w):.0f} deg" for tt, d, w in self.pause_travel if a <= tt <= b]
+            out.append(f"the log pauses from t={a:.3f} to {b:.3f} s (no sensor for {b - a:.4g} s): the filter held "
+                       "the pose, started v, omega and the slips afresh after it"
+                       + (f", and carried the pose by the wheels' travel across it ({'; '.join(moved)})"
+                          if moved else ""))
+        return out
 
     def heading_warnings(self) -> list[str]:
         """The warning of a start whose heading the motion had not shown yet, if fixes were taken so."""
@@ -603,8 +699,8 @@ class EKF:
 def event_values(meas, code: int, i: int) -> tuple:
     """Row i of sensor ``code`` of ``meas`` (measurements.Measurements) as
     ``EKF.step`` takes it."""
-    if code == WHEEL:
-        return meas.wheel.m[i], meas.wheel.sigma[i]
+    if code == WHEEL:       # speeds, sigmas, the encoder row's interval [s] (0 for wheel_speeds.csv)
+        return meas.wheel.m[i], meas.wheel.sigma[i], float(meas.wheel.dt[i]) if meas.wheel.dt is not None else 0.0
     if code == GYRO:
         return (meas.gyro[1][i:i + 1],)
     if code == GPS:

@@ -122,8 +122,34 @@ def _slip_distance(t: np.ndarray, mean: np.ndarray, a: float, b: float) -> tuple
     if sel.size < 2:
         return sel, 0.0
     s_cm = 0.5 * np.abs(mean[sel][:, S.SLIP].sum(1))
-    edges = np.concatenate([[a], 0.5 * (t[sel][1:] + t[sel][:-1]), [b]])
-    return sel, float(np.sum(s_cm * np.diff(edges)))
+    # Edges from every row, so that a row's neighbours outside the gap count (row_edges).
+    e = np.concatenate([[-np.inf], row_edges(t), [np.inf]])
+    lo, hi = np.maximum(e[sel], a), np.minimum(e[sel + 1], b)
+    lo[0], hi[-1] = a, b
+    return sel, float(np.sum(s_cm * np.maximum(hi - lo, 0.0)))
+
+
+def row_edges(t: np.ndarray) -> np.ndarray:
+    """(N-1,) [s] where each of the rows t (N,) hands over to the next: the
+    midpoint, except next to a row that stands for a much longer interval
+    (a wheel dropout's, a pause's: rows are stamped at their interval's
+    midpoint), which takes all of the gap but the short row's half spacing.
+    Otherwise a row's slip before a pause in the log would count for half
+    the pause (a 30 min pause during a slip: 100-480 m of slip "in the
+    gap" where the robot stood still). Two short rows with a long gap and
+    no row between keep the midpoint."""
+    g = np.diff(t)
+    edges = t[:-1] + 0.5 * g
+    if len(g) < 2:
+        return edges
+    left = np.concatenate([[np.inf], g[:-1]])        # the spacing before row i
+    right = np.concatenate([g[1:], [np.inf]])        # the spacing after row i+1
+    # (both short with a long gap between, no row standing for it: the midpoint)
+    long_after = (g > 3.0 * left) & ~(g > 3.0 * right)    # row i short, row i+1 the long one
+    long_before = (g > 3.0 * right) & ~(g > 3.0 * left)   # row i+1 short, row i the long one
+    edges[long_after] = t[:-1][long_after] + 0.5 * left[long_after]
+    edges[long_before] = t[1:][long_before] - 0.5 * right[long_before]
+    return edges
 
 
 #: The first fix after a gap, against a causal row's prediction: beyond this

@@ -46,6 +46,7 @@ from odomgraph.errors import EstimatorDivergedError
 from odomgraph.estimators.batch import (HELD_SIGMA, GraphOptions, build_problem, factor_arrays, marginal_blocks,
                                         retract, smoother_estimate, solve_window)
 from odomgraph.estimators.graph import NB, Problem, linearize, slip_prior_rows, walk_rows
+from odomgraph.estimators.measurements import PAUSE_S
 from odomgraph.result import Estimate
 from odomgraph.estimators.schedule import Schedule
 from odomgraph.io.log import Log
@@ -442,8 +443,19 @@ class _Runner:
             setattr(self, name, getattr(self, name)[:n])
 
     def _new_keyframe(self, k: int) -> None:
-        """Predict keyframe k from k-1 (its initial value)."""
+        """Predict keyframe k from k-1 (its initial value). Across an interval
+        longer than a pause in the log (measurements.PAUSE_S) the velocity
+        before it says nothing of the average over it: that comes from the
+        interval's wheels (no slip, the current scale factors), else the
+        first linearisation puts keyframe k an hour's drive away (a probe's
+        pause of a day: a row 466 m off at a sigma of 2.8 m)."""
         kf = self.prob.kf
+        if kf.dt[k - 1] > PAUSE_S:
+            w = self.W[k - 1]
+            kl, kr, kb = w[St.W_SCALE]
+            ul, ur = kf.enc_m[k - 1, 0] / kl, kf.enc_m[k - 1, 1] / kr
+            w[St.W_VEL] = 0.5 * (ul + ur), (ur - ul) / (kb * self.prob.robot.track_width)
+            w[St.W_SLIP] = 0.0
         p, _ = propagate(*self.pose[k - 1], self.W[k - 1, 0], self.W[k - 1, 1], kf.dt[k - 1])
         self.pose[k] = [p[0], p[1], wrap_angle(p[2])]
         self.W[k] = self.W[k - 1]
@@ -874,9 +886,14 @@ class ISAM2Runner(_Runner):
         keys = list(vals.keys())
         keys = [k for c in ("x", "w", "s") for k in keys if chr(gtsam.Symbol(k).chr()) == c]
         d, V = np.linalg.eigh(0.5 * (Lam + Lam.T))
-        keep = d > 1e-9 * max(d.max(), 1e-300)
-        A = np.sqrt(d[keep])[:, None] * V[:, keep].T
-        b = (V[:, keep].T @ eta) / np.sqrt(d[keep])
+        # Directions the marginal barely informs are floored, not dropped: a
+        # variable left with no information at all stops the fresh ISAM2
+        # (IndeterminateSystemException; measured: the slips after an hour's
+        # pause in the log, whose random walk left them 1e-12 of the scale
+        # factors' information). The floor is a prior far wider than the data.
+        d = np.maximum(d, 1e-9 * max(d.max(), 1e-300))
+        A = np.sqrt(d)[:, None] * V.T
+        b = (V.T @ eta) / np.sqrt(d)
         jf = gtsam.JacobianFactor(keys[0], A[:, 0:3], keys[1], A[:, 3:9], keys[2], A[:, 9:11], b,
                                   gtsam.noiseModel.Unit.Create(len(b)))
         g = gtsam.NonlinearFactorGraph()
@@ -1036,15 +1053,17 @@ class FixedLagRunner(_Runner):
     def start(self, factors, values):
         self.smoother = gtsam.IncrementalFixedLagSmoother(self.options.lag, _params(self.options, reuse_slots=True))
         self.done = np.zeros(self.prob.kf.n, bool)
+        self.filed_late: dict[int, float] = {}   # keyframe -> the later time [s] the smoother files it under
         self.Sig = np.zeros((self.prob.kf.n, NB, NB))
         self.linear_index: dict[int, list[int]] = {}
         self._relin_next = 0
         self._update(factors, values, [0])
 
-    def _update(self, factors, values, keyframes, remove=()):
+    def _update(self, factors, values, keyframes, remove=(), stamp: dict[int, float] | None = None):
+        """``stamp``: keyframe -> the time [s] the smoother files it under, where not its own."""
         stamps = gtsam.FixedLagSmootherKeyTimestampMap()
         for k in keyframes:
-            t = float(self.prob.kf.t[k])
+            t = float(self.prob.kf.t[k]) if stamp is None or k not in stamp else stamp[k]
             for key in (X_KEY(k), W_KEY(k), S_KEY(k)):
                 stamps.insert((key, t))
         self.smoother.update(factors, values, stamps, list(remove))
@@ -1102,7 +1121,7 @@ class FixedLagRunner(_Runner):
         for j in range(j0, k):
             graph.push_back(self.graph.interval_factors(j, self.pose, self.W))
         self.smoother = gtsam.IncrementalFixedLagSmoother(self.options.lag, _params(self.options, reuse_slots=True))
-        self._update(graph, values, range(j0, k + 1))
+        self._update(graph, values, range(j0, k + 1), stamp=self.filed_late)
         # The new smoother's factors were all linearised at the solution: none to redo.
         self.linear_index, self._relin_next = {}, k
         est = self.smoother.calculateEstimate()
@@ -1111,12 +1130,23 @@ class FixedLagRunner(_Runner):
 
     def step(self, k, factors, values):
         kf = self.prob.kf
-        # Keyframes that the coming update marginalises: take their estimate now.
-        leaving = np.nonzero(~self.done[:k] & (kf.t[:k] < kf.t[k] - self.options.lag))[0]
-        if leaving.size:
+        # Keyframes that the coming update marginalises: take their estimate
+        # now. Not keyframe k-1, whose interval's factors (its wheels, its W)
+        # come with this update: after an interval longer than the lag (an
+        # encoder dropout, a pause in the log) it would leave with W_{k-1}
+        # never measured (a probe's hour-long pause: a row 2 m off at a
+        # sigma of 2.7 km and 18708 rad). It is filed just inside the
+        # window instead, and leaves at the next update.
+        keep = {}
+        if kf.t[k - 1] < kf.t[k] - self.options.lag:
+            keep[k - 1] = float(kf.t[k]) - self.options.lag + 1e-6 * self.options.lag
+        leaving = [j for j in np.nonzero(~self.done[:k - 1] & (kf.t[:k - 1] < kf.t[k] - self.options.lag))[0]
+                   if self.filed_late.get(int(j), -np.inf) < kf.t[k] - self.options.lag]
+        if leaving:
             est = self.smoother.calculateEstimate()
             for j in leaving:
                 self._harvest(int(j), est)
+                self.filed_late.pop(int(j), None)
         n_lin = sum(1 for i in range(factors.size()) if isinstance(factors.at(i), gtsam.LinearContainerFactor))
         # Re-linearise the interval that just became `relinearize_after` old,
         # as ISAM2Runner.step does, while both its keyframes are still inside
@@ -1143,7 +1173,8 @@ class FixedLagRunner(_Runner):
         while lo < k - 1 and self.done[lo]:
             lo += 1
         fresh = self.graph.refresh_slip_priors(lo, k - 1, self.W, self.linear_index, factors, remove)
-        self._update(factors, values, [k], remove)
+        self._update(factors, values, [k, *keep], remove, keep)
+        self.filed_late.update(keep)
         idx = list(self.smoother.getISAM2Result().getNewFactorsIndices())
         self.linear_index[k - 1] = idx[:n_lin]
         if extra is not None:

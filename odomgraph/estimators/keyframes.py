@@ -24,6 +24,7 @@ from functools import cached_property
 import numpy as np
 
 from odomgraph.factors.encoder import speed_sigma
+from odomgraph.estimators.measurements import PAUSE_S
 from odomgraph.io.log import Log
 
 W_NAMES = ("v", "omega", "gyro_bias", "slip_left", "slip_right", "scale_left", "scale_right", "scale_track")
@@ -295,6 +296,17 @@ def build_keyframes(log: Log, t_start: float, keyframe_hz: float, causal: bool =
         tot = np.stack([np.bincount(k[inside], ms[inside, j], minlength=len(t) - 1) for j in range(2)], -1)
         m = tot / np.maximum(n, 1)[:, None]
         sigma = speed_sigma(m, a, b) / np.sqrt(np.maximum(n, 1))[:, None]
+        # An interval that spans a pause in the log (no sample for longer than
+        # PAUSE_S) has no speed measured over it: its one sample is an
+        # instant, not its average (a day's pause after a sample of 0.5 m/s
+        # put the robot 3.6 km away in the smoothers' first linearisation).
+        # Taken as standing still, with a random walk's spread over it.
+        paused = np.diff(t) > PAUSE_S
+        if paused.any():
+            pn = r.process
+            q2 = pn.accel**2 + (0.5 * r.track_width * pn.yaw_accel) ** 2
+            m[paused] = 0.0
+            sigma[paused] = np.sqrt(sigma[paused] ** 2 + q2 * np.diff(t)[paused, None] / 3.0)
         # wheel travel by the trapezoid rule between speed samples
         travel_t = w.t
         travel = np.concatenate([np.zeros((1, 2)), np.cumsum(0.5 * (ms[1:] + ms[:-1]) * np.diff(w.t)[:, None], 0)])

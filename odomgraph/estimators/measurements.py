@@ -50,6 +50,25 @@ class Measurements:
     """Single-sample spikes taken out per sensor (despike)."""
 
 
+#: No reading of any sensor for longer than this [s] is a pause in the log
+#: (a robot parked while its logger stopped, two sessions in one file), not
+#: a stretch to coast through (estimators.ekf: EKF._pause).
+PAUSE_S = 10.0
+
+
+def pause_spans(meas: Measurements) -> list[tuple[float, float]]:
+    """(last reading before, first reading after) [s] of every silence of all
+    sensors longer than PAUSE_S. From the readings' own stamps: an encoder
+    row's interval ends, not the midpoint its speed is stamped at (the
+    midpoint of a row spanning the silence would halve it)."""
+    w = meas.wheel
+    ts = [w.t] if w.dt is None else [w.t - 0.5 * w.dt, w.t + 0.5 * w.dt]
+    ts += [src[0] for src in (meas.gyro, meas.gps, meas.ranges, meas.velocity) if src is not None]
+    t = np.unique(np.concatenate(ts))
+    k = np.flatnonzero(np.diff(t) > PAUSE_S)
+    return [(float(t[i]), float(t[i + 1])) for i in k]
+
+
 def from_log(log: Log) -> Measurements:
     """The log's measurements, after ``clean``."""
     for obj, name in ((log.encoders, "encoders.csv"), (log.wheel_speeds, "wheel_speeds.csv")):
