@@ -636,10 +636,20 @@ def calibrate(log: Log, schedule: Schedule = Schedule(calibrate_until=None), met
         process, table = tune_process_noise(log, schedule, method, progress, **options)
         log = log.with_(robot=log.robot.with_(process=process))
     est = estimate(log, method, schedule, progress, **options)
+    gyro = None
+    if log.gyro is not None and len(log.gyro.t):
+        gyro = _gyro_scale(log, est, schedule, options)
+        if gyro["corrected"]:
+            from odomgraph.analysis.gyroscale import rescaled
+            log = rescaled(log, gyro["value"])
+            est = estimate(log, method, schedule, None, **options)
     cal = est.calibration
     r = log.robot
     k = [cal[n]["value"] for n in ("scale_left", "scale_right", "scale_track")]
     sk = [cal[n]["sigma"] for n in ("scale_left", "scale_right", "scale_track")]
+    if gyro is not None:
+        # the consider term: what the gyro scale's own uncertainty does to each scale factor
+        sk = [float(np.hypot(s, j * gyro["sigma"])) for s, j in zip(sk, gyro["sensitivity"])]
     new = r.with_(ticks_per_meter_left=k[0] * r.ticks_per_meter_left,
                   ticks_per_meter_right=k[1] * r.ticks_per_meter_right,
                   track_width=k[2] * r.track_width)
@@ -654,7 +664,6 @@ def calibrate(log: Log, schedule: Schedule = Schedule(calibrate_until=None), met
                                              for f, e, p in table]},
     }
     # Dead reckoning on this log, against truth or else the smoother's own path.
-    import numpy as np
     start = (est.t[0], *est.mean[0, 0:3])
     if log.truth is not None:
         ref = lambda t: (log.truth.at("x", t), log.truth.at("y", t))
@@ -667,6 +676,10 @@ def calibrate(log: Log, schedule: Schedule = Schedule(calibrate_until=None), met
         report[f"dead_reckoning_{name}"] = {"rms_m": float(np.sqrt(np.mean(e**2))), "final_m": float(e[-1])}
     report["reference"] = "truth" if log.truth is not None else "smoothed estimate"
     report.update(_calibration_checks(log, est, k, sk, method, schedule, options))
+    if gyro is not None:
+        report["gyro_scale"] = {n: gyro[n] for n in ("value", "sigma", "determined", "corrected")}
+        if gyro["line"]:
+            report["warnings"].append(gyro["line"])
     per_fix = log.gps is not None and log.gps.sigma is not None
     new = _with_fitted_noise(new, est, report["warnings"], per_fix_gps=per_fix)
     # what is written, after the data's widening (the tuned value is its floor)
@@ -680,6 +693,35 @@ def calibrate(log: Log, schedule: Schedule = Schedule(calibrate_until=None), met
 
 #: A calibrated scale factor this far from 1 is flagged as implausible.
 IMPLAUSIBLE = 0.10
+
+
+def _gyro_scale(log: Log, est: Estimate, schedule: Schedule, options: dict) -> dict:
+    """The gyro's scale factor from the fixes, by its profile likelihood
+    (analysis.gyroscale): batch runs with the gyro divided by 1 - STEP, 1,
+    1 + STEP, on the noise model ``est`` fitted. Returns {"value", "sigma",
+    "determined", "corrected", "sensitivity" (3,) d scale / d g, "line"}."""
+    from odomgraph.analysis import gyroscale as G
+    from odomgraph.analysis.noise import widened
+    fitted = widened(log, {k: v["applied"] for k, v in est.noise_scales.items()})
+    from dataclasses import fields
+    from odomgraph.estimators.batch import GraphOptions
+    opts = {k: v for k, v in options.items() if k in {f.name for f in fields(GraphOptions)}}
+    gs, costs, scales = [], [], {}
+    for g in (1.0 - G.STEP, 1.0, 1.0 + G.STEP):
+        run = _estimate_once(G.rescaled(fitted, g), Method.batch, schedule, None, opts)
+        gs.append(g)
+        costs.append(run.cost)
+        scales[g] = run.mean[-1, S.SCALE].copy()
+    sens = (scales[1.0 + G.STEP] - scales[1.0 - G.STEP]) / (2.0 * G.STEP)
+    has_fixes = log.gps is not None or log.ranges is not None
+    fit = G.fit_profile(np.asarray(gs), np.asarray(costs)) if has_fixes else None
+    if fit is None:
+        return {"value": 1.0, "sigma": G.PRIOR, "determined": False, "corrected": False,
+                "sensitivity": [float(v) for v in sens], "line": G.unknown_note(G.PRIOR)}
+    g_hat, sigma = fit
+    corrected = G.significant(g_hat, sigma)
+    return {"value": g_hat, "sigma": sigma, "determined": True, "corrected": corrected,
+            "sensitivity": [float(v) for v in sens], "line": G.warning(g_hat, sigma) if corrected else ""}
 
 
 def _calibration_checks(log: Log, est: Estimate, k, sk, method: Method, schedule: Schedule, options: dict) -> dict:

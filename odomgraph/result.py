@@ -84,6 +84,11 @@ class Estimate:
     ``rejected`` too."""
     t_origin: int = 0
     """``t`` counts seconds from this integer second of the log's clock (Log.t_origin)."""
+    cost: float | None = None
+    """batch: the final cost, half the sum of the whitened squared residuals
+    (robust losses and priors included); differences between runs on one
+    log with one noise model are log-likelihood ratios (the gyro scale's
+    profile, analysis.gyroscale)."""
 
     def __post_init__(self):
         n = len(self.t)

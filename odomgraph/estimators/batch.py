@@ -625,7 +625,7 @@ def run_batch(log: Log, schedule: Schedule = Schedule(), options: SmootherOption
     notes = [f"batch: {prob.kf.n} keyframes at {options.keyframe_hz:g} Hz, {iters} Gauss-Newton iterations, "
              f"final cost {cost:.1f}; {start}", prob.init.note]
     return smoother_estimate(prob, schedule, pose, W, Sig, "batch", wall0, notes, warnings, held=held,
-                             range_bias=range_bias, held_out=held_out)
+                             range_bias=range_bias, held_out=held_out, cost=float(cost))
 
 
 def smoother_estimate(prob: Problem, schedule: Schedule, pose: np.ndarray, W: np.ndarray, Sig: np.ndarray,
