@@ -703,6 +703,9 @@ def _gyro_scale(log: Log, est: Estimate, schedule: Schedule, options: dict) -> d
     from odomgraph.analysis import gyroscale as G
     from odomgraph.analysis.noise import widened
     fitted = widened(log, {k: v["applied"] for k, v in est.noise_scales.items()})
+    if est.time_offsets.get("gps"):
+        # the GPS clock the run estimated (a clock off moves the fixes along the path: every turn with it)
+        fitted = fitted.with_(robot=fitted.robot.with_(gps_time_offset=est.time_offsets["gps"]["value"]))
     from dataclasses import fields
     from odomgraph.estimators.batch import GraphOptions
     opts = {k: v for k, v in options.items() if k in {f.name for f in fields(GraphOptions)}}
