@@ -38,13 +38,77 @@ def estimate(log: Log, method: Method = Method.ekf, schedule: Schedule = Schedul
     options = {k: v for k, v in options.items() if v is not None}
     from odomgraph.io.log import rebased
     log = rebased(log)  # a real clock's stamps, counted from a whole second (Log.t_origin)
-    if time_offset:
-        est = _with_time_offset(log, method, schedule, progress, {**options, "fit_noise": fit_noise})
-    else:
-        est = _estimate_checked(log, method, schedule, progress, options, fit_noise)
+    def run(sch: Schedule, prog) -> Estimate:
+        if time_offset:
+            return _with_time_offset(log, method, sch, prog, {**options, "fit_noise": fit_noise})
+        return _estimate_checked(log, method, sch, prog, options, fit_noise)
+    est = _with_window_slip(run(schedule, progress), log, schedule, run, method)
     for e in (est, est.online):
         if e is not None:
             e.t_origin = log.t_origin
+    return est
+
+
+def _diverged_in_window(message: str, log: Log, schedule: Schedule) -> bool:
+    """Whether a divergence message's time (``at t=...``) lies inside the
+    calibration window or a few seconds after it (where a window's wrong
+    scale factors show), or names none."""
+    import re
+    m = re.search(r"at t=(-?[0-9.]+) s", message)
+    if m is None:
+        return True
+    return float(m.group(1)) < log.t_start + schedule.calibrate_until + WINDOW_AFTERMATH
+
+
+#: Seconds after the calibration window in which a divergence is blamed on it.
+WINDOW_AFTERMATH = 15.0
+
+
+def _with_window_slip(est: Estimate, log: Log, schedule: Schedule, run, method: Method) -> Estimate:
+    """``est``, or when its GPS fixes sat far from it for seconds inside the
+    calibration window (analysis.windowfit: both wheels slipped alike, which
+    the check before the fit misses), a smoother's estimate ``run(schedule,
+    None)`` gives with those seconds out of the window (twice at most: the
+    second look may show the rest of a slip), with a warning; a flag if the
+    fixes still disagree. The EKF is flagged, not run again: its scale
+    states take up part of such a slip while it happens, and its fixes
+    disagree only later (a probe: slip at 4-11 s, fixes off at 15-20 s),
+    so the seconds it names are not the slip's (run again on them, its
+    scale factors came out 50 sigma off)."""
+    from odomgraph.analysis import windowfit
+    from odomgraph.errors import OdomgraphError
+    from odomgraph.estimators.slipcheck import merged
+    if est.time_offsets.get("gps"):
+        return est              # (its fixes' times are the corrected ones: compared elsewhere)
+    t0, t_switch = log.t_start, schedule.switch_time(log.t_start)
+
+    def found(e):
+        return windowfit.stretches(e, log, t0, t_switch, e.noise_scales.get("gps", {}).get("applied", 1.0))
+    new = found(est)
+    if not new:
+        return est
+    if method is Method.ekf:
+        line = windowfit.ekf_warning(new)
+        est.warnings.insert(0, line)
+        est.flags.append(line)
+        return est
+    out, first = list(schedule.slipping), est
+    for _ in range(2):
+        out = merged(out + new)
+        try:
+            est = run(replace(schedule, slipping=tuple(out)), None)
+        except OdomgraphError as exc:
+            line = windowfit.failed_warning(out, exc)
+            first.warnings.insert(0, line)
+            first.flags.append(line)
+            return first
+        new = [s for s in found(est) if not any(a <= s[0] and s[1] <= b for a, b in out)]
+        if not new:
+            break
+    line = windowfit.warning(out, resolved=not new)
+    est.warnings.insert(0, line)
+    if new:
+        est.flags.append(line)
     return est
 
 
@@ -80,12 +144,16 @@ def _estimate_checked(log: Log, method: Method, schedule: Schedule, progress, op
             # yard log: isam2 and fixed-lag stopped 2 s after a 20 s window
             # that a 0.12 m/s slip filled). Without the window the slip is
             # estimated throughout; the run is flagged either way.
-            if method not in (Method.isam2, Method.fixed_lag) or not schedule.calibrate_until:
+            if (method not in (Method.isam2, Method.fixed_lag, Method.ekf) or not schedule.calibrate_until
+                    or (method is Method.ekf and not _diverged_in_window(str(exc), log, schedule))):
                 raise
-            retried = (f"{exc}; run again with slip estimated throughout (no calibration window): if the "
-                       "wheels slipped inside the window, which the schedule takes as slip-free, the scale "
-                       "factors it gave were wrong; not trustworthy")
-            schedule = replace(schedule, calibrate_until=None)
+            # (the EKF has no window-free schedule: slip-only, its scale factors stay at their prior)
+            free = 0.0 if method is Method.ekf else None
+            retried = (f"{exc}; run again with slip estimated throughout (no calibration window"
+                       + ("; the EKF's scale factors then stay at their prior" if method is Method.ekf else "")
+                       + "): if the wheels slipped inside the window, which the schedule takes as slip-free, "
+                       "the scale factors it gave were wrong; not trustworthy")
+            schedule = replace(schedule, calibrate_until=free)
             est, options = run(schedule, options)
     except EstimatorDivergedError as exc:
         # A mounting mistake is the likeliest cause, and the data can name it.

@@ -120,7 +120,7 @@ def zero_slip_intervals(t: np.ndarray, init, t_start: float, schedule: Schedule)
     if schedule.calibrate_until is None:
         return np.zeros(len(mid), bool)
     zero = mid < t_start + schedule.calibrate_until
-    slipping, _ = in_window(init.slipping, t_start, t_start + schedule.calibrate_until)
+    slipping, _ = in_window(schedule.slip_stretches(init.slipping), t_start, t_start + schedule.calibrate_until)
     return zero & ~in_stretches(mid, slipping)
 
 
@@ -696,7 +696,8 @@ def window_warnings(prob: Problem, schedule: Schedule) -> list[str]:
         return []
     t0 = float(prob.kf.t[0]) if prob.init is None else None
     start = prob.init.t if prob.init is not None else t0
-    return in_window(prob.init.slipping, start, start + schedule.calibrate_until)[1] if prob.init else []
+    return (in_window(schedule.slip_stretches(prob.init.slipping), start, start + schedule.calibrate_until)[1]
+            if prob.init else [])
 
 
 def measurement_counts(prob: Problem) -> dict[str, int]:

@@ -469,7 +469,8 @@ class EKF:
         obs = self.init.observability
         self._pinned = bool(obs.unobservable)
         # The schedule's window, less where the fixes say the wheels slipped (slipcheck).
-        self.slipping, self.window_warnings = in_window(self.init.slipping, m.t_start, self.t_switch)
+        self.slipping, self.window_warnings = in_window(sch.slip_stretches(self.init.slipping), m.t_start,
+                                                        self.t_switch)
         # A start with no heading (standing still, no [initial]): fixes must not
         # make one up (estimators.heading). Until the motion shows it, they
         # are taken with the heading considered and the position floored.

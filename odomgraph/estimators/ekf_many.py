@@ -124,7 +124,7 @@ def run_ekf_many(logs: list[Log], schedule: Schedule = Schedule(), options: EKFO
     track, lever_gps, lever_rng = r.track_width, r.gps_lever_arm, r.range_lever_arm
     gates = gate_thresholds(opt)
     t_switch = sch.switch_time(m0.t_start)
-    slip_ev = in_stretches(t_ev, in_window(inits[0].slipping, m0.t_start, t_switch)[0])
+    slip_ev = in_stretches(t_ev, in_window(schedule.slip_stretches(inits[0].slipping), m0.t_start, t_switch)[0])
     switch_sigma = None
     holding = False
     rows = int(np.sum(code_ev == WHEEL))

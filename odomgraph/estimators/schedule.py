@@ -29,6 +29,11 @@ class Schedule:
     calibrate_until: float | None = 20.0
     """Seconds after the log's first sample; 0 = slip only; None = no schedule."""
     hold: Hold = Hold.consider
+    slipping: tuple[tuple[float, float], ...] = ()
+    """(start, end) [s, the log's clock] stretches of the calibration window
+    not taken as slip-free, besides those the estimators find before they
+    start (estimators.slipcheck): where a first estimate's fixes said the
+    wheels slipped (analysis.windowfit)."""
 
     def __post_init__(self):
         import math
@@ -39,6 +44,11 @@ class Schedule:
             from odomgraph.checks import value_text
             raise OptionError(f"calibrate_until (--calibrate-until) must be seconds >= 0 or None, got {value_text(c)}")
         object.__setattr__(self, "hold", Hold(self.hold))
+
+    def slip_stretches(self, found) -> list[tuple[float, float]]:
+        """``found`` (the estimators' own slipcheck stretches) and ``slipping``, merged."""
+        from odomgraph.estimators.slipcheck import merged
+        return merged(list(found) + [tuple(s) for s in self.slipping])
 
     def switch_time(self, t_start: float) -> float | None:
         """When calibration ends [s, the log's clock] for a log starting at
