@@ -11,7 +11,9 @@ the fixes: a probe's yard logs had batch and isam2 0.5-0.85 m off at z
 
 After the fit the fixes say it plainly: inside the window they sit many
 sigma from the estimate for seconds on end (per-second median of the
-normalised distance 6-20 there; at most 1.9 anywhere on clean logs).
+normalised distance 6-20 there; at most 1.9 anywhere on clean logs, and no
+stretch found on 48 clean logs of both scenarios with GPS at 3-20 Hz and
+0.02-0.2 m).
 ``stretches`` finds those seconds; the pipeline then runs again with them
 out of the window (Schedule.slipping) and says so.
 """
@@ -49,6 +51,11 @@ def stretches(est, log, t_start: float, t_switch: float | None, gps_scale: float
     if inside.sum() < MIN_FIXES * MIN_RUN:
         return []
     t, r, sig = t[inside], r[inside], sig[inside] * gps_scale
+    # A fix sent again unchanged (a receiver's stale copies) is one fix, as
+    # the estimators read it (measurements): copies would make one fix a median.
+    xy = np.stack([log.gps.x, log.gps.y], -1)[(log.gps.t >= est.t[0]) & (log.gps.t <= est.t[-1])][inside]
+    fresh = np.concatenate([[True], np.any(np.diff(xy, axis=0) != 0.0, axis=1)])
+    t, r, sig = t[fresh], r[fresh], sig[fresh]
     row = np.hypot(np.interp(t, est.t, est.sigma[:, 0]), np.interp(t, est.t, est.sigma[:, 1]))
     u = np.hypot(r[:, 0], r[:, 1]) / np.sqrt(sig**2 + row**2)
     sec = np.floor(t - t_start).astype(int)
