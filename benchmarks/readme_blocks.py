@@ -1288,10 +1288,26 @@ def online_stream(results: Path) -> str:
     return "\n".join(out) + "\n\n  " + _source("online", d)
 
 
+def log_io(results: Path) -> str:
+    """Reading a log: speed and memory against the files (benchmarks.log_io)."""
+    d = _load("log_io", results)
+    r = max(d["runs"], key=lambda r: r["minutes"])
+    sensors = (r["log_bytes"] - r["truth_bytes"]) / 1e6
+    rd, rt, lt = r["read"], r["read-truth"], r["loadtxt"]
+    mem = lambda x, n: (x["peak_kb"] - x["base_kb"]) * 1024 / n
+    return (f"- **Reading a log** ({r['minutes']:g} minutes, {r['log_bytes'] / 1e6:.0f} MB of which truth.csv "
+            f"{r['truth_bytes'] / 1e6:.0f} MB): an estimator reads the sensors' {sensors:.1f} MB in "
+            f"{rd['wall_s']:.2f} s ({sensors / rd['wall_s']:.0f} MB/s, peak {mem(rd, r['log_bytes'] - r['truth_bytes']):.1f}× "
+            f"the files) and never reads truth.csv; a scoring tool reads every file in {rt['wall_s']:.2f} s "
+            f"({r['log_bytes'] / 1e6 / rt['wall_s']:.0f} MB/s, peak {mem(rt, r['log_bytes']):.1f}×), "
+            f"{rt['wall_s'] / lt['wall_s']:.1f}× `numpy.loadtxt`'s time on the same files without any of the "
+            f"checks. Issue 17's targets: 50 MB/s, 3× the files.\n\n" + _source("log_io", d))
+
+
 BLOCKS = {f.__name__: f for f in (
     ekf_accuracy, ekf_throughput, smoother_accuracy, faults, real_data_honesty,
     # README.md
-    smoother_scale, wheel_speed_units, montecarlo_wall, montecarlo_findings, optiodom_transfer, librsf_limits,
+    smoother_scale, log_io, wheel_speed_units, montecarlo_wall, montecarlo_findings, optiodom_transfer, librsf_limits,
     calibration_transfer,
     faults_still, range_bias, report_size, weak_gps, weak_online, online_stream,
     # benchmarks/README.md
