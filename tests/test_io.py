@@ -202,3 +202,13 @@ def test_truth_read_late_equals_truth_written(paper_log, paper_log_dir):
     assert back.truth.values.keys() == paper_log.truth.values.keys()
     cut = back.truncated(30.0)
     assert cut.truth.t[-1] <= 30.0 and len(cut.truth.values["x"]) == len(cut.truth.t)
+
+
+def test_a_log_with_its_truth_unread_pickles_with_the_rows(paper_log_dir):
+    """A process pool (or a checkpoint) pickles the rows, not the reader."""
+    import pickle
+    log = read_log(paper_log_dir)
+    assert not log.truth.loaded
+    back = pickle.loads(pickle.dumps(log))
+    assert back.truth.loaded
+    np.testing.assert_array_equal(back.truth.t, log.truth.t)

@@ -161,6 +161,11 @@ class Truth:
             return wrap_angle(np.interp(t, self.t, th))
         return np.interp(t, self.t, self.values[name])
 
+    def __getstate__(self):
+        # (a process pool or a checkpoint pickles it: the rows, not the reader)
+        t, values = self._loaded()
+        return {"_t": t, "_values": values, "_load": None}
+
     @property
     def loaded(self) -> bool:
         """Whether the rows have been read (see ``file``)."""
