@@ -56,10 +56,12 @@ def _diverged_in_window(message: str, log: Log, schedule: Schedule) -> bool:
     import re
     m = re.search(r"at t=(-?[0-9.]+) s", message)
     if m is None:
-        return True
+        return False            # (not a divergence in time: unphysical scale factors, a mounting mistake)
     return float(m.group(1)) < log.t_start + schedule.calibrate_until + WINDOW_AFTERMATH
 
 
+#: What a run again without the calibration window says (_estimate_checked).
+RETRIED = "run again with slip estimated throughout"
 #: Seconds after the calibration window in which a divergence is blamed on it.
 WINDOW_AFTERMATH = 15.0
 
@@ -80,6 +82,8 @@ def _with_window_slip(est: Estimate, log: Log, schedule: Schedule, run, method: 
     from odomgraph.estimators.slipcheck import merged
     if est.time_offsets.get("gps"):
         return est              # (its fixes' times are the corrected ones: compared elsewhere)
+    if any(RETRIED in f for f in est.flags):
+        return est              # (it ran again without the window, and says so)
     t0, t_switch = log.t_start, schedule.switch_time(log.t_start)
 
     def found(e):
@@ -145,11 +149,12 @@ def _estimate_checked(log: Log, method: Method, schedule: Schedule, progress, op
             # that a 0.12 m/s slip filled). Without the window the slip is
             # estimated throughout; the run is flagged either way.
             if (method not in (Method.isam2, Method.fixed_lag, Method.ekf) or not schedule.calibrate_until
-                    or (method is Method.ekf and not _diverged_in_window(str(exc), log, schedule))):
+                    or (method is Method.ekf and (not _diverged_in_window(str(exc), log, schedule)
+                                                  or mounting_warnings(log)))):
                 raise
             # (the EKF has no window-free schedule: slip-only, its scale factors stay at their prior)
             free = 0.0 if method is Method.ekf else None
-            retried = (f"{exc}; run again with slip estimated throughout (no calibration window"
+            retried = (f"{exc}; {RETRIED} (no calibration window"
                        + ("; the EKF's scale factors then stay at their prior" if method is Method.ekf else "")
                        + "): if the wheels slipped inside the window, which the schedule takes as slip-free, "
                        "the scale factors it gave were wrong; not trustworthy")
@@ -571,6 +576,8 @@ def estimate_to_dir(log: Log, out: Path, method: Method, schedule: Schedule, pro
     check_output(out, inputs)
     if rate is not None and at is not None:
         raise OdomgraphError("give --rate or --at, not both")
+    if log.truth is not None:
+        log.truth.values    # scored at the end: a bad truth.csv is said now, not after the run
     log = rebased(log)
     if at is not None:
         src = {"truth": log.truth, "gps": log.gps}.get(at, "bad")
@@ -778,14 +785,32 @@ def _gyro_scale(log: Log, est: Estimate, schedule: Schedule, options: dict) -> d
     from odomgraph.estimators.batch import GraphOptions
     opts = {k: v for k, v in options.items() if k in {f.name for f in fields(GraphOptions)}}
     gs, costs, scales = [], [], {}
-    for g in (1.0 - G.STEP, 1.0, 1.0 + G.STEP):
+
+    def profile(g):
         run = _estimate_once(G.rescaled(fitted, g), Method.batch, schedule, None, opts)
         gs.append(g)
         costs.append(run.cost)
         scales[g] = run.mean[-1, S.SCALE].copy()
+    try:
+        for g in (1.0 - G.STEP, 1.0, 1.0 + G.STEP):
+            profile(g)
+    except OdomgraphError as exc:
+        return {"value": 1.0, "sigma": G.PRIOR, "determined": False, "corrected": False,
+                "sensitivity": [0.0, 0.0, 1.0],
+                "line": f"the gyro's scale factor could not be profiled ({' '.join(str(exc).split())}): "
+                        f"{G.unknown_note(G.PRIOR)}"}
     sens = (scales[1.0 + G.STEP] - scales[1.0 - G.STEP]) / (2.0 * G.STEP)
-    has_fixes = log.gps is not None or log.ranges is not None
+    has_fixes = any(s is not None and len(s.t) for s in (log.gps, log.ranges))
     fit = G.fit_profile(np.asarray(gs), np.asarray(costs)) if has_fixes else None
+    if fit is not None and G.STEP < abs(fit[0] - 1.0) <= G.MAX_OFF:
+        # far from the stencil: one more run at the estimate, and the parabola through all four
+        try:
+            profile(fit[0])
+            fit = G.fit_profile(np.asarray(gs), np.asarray(costs))
+        except OdomgraphError:
+            pass
+    if fit is not None and abs(fit[0] - 1.0) > G.MAX_OFF:
+        fit = None              # no scale error: a unit or mounting mistake (analysis.mounting says which)
     if fit is None:
         return {"value": 1.0, "sigma": G.PRIOR, "determined": False, "corrected": False,
                 "sensitivity": [float(v) for v in sens], "line": G.unknown_note(G.PRIOR)}

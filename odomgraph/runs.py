@@ -92,6 +92,8 @@ def compare_to_dir(log: Log, out: Path, schedule: Schedule, progress_for=None, t
     ``include_log`` also writes the log itself to out/log (the demo does).
     Returns the Comparison."""
     from odomgraph.io.log import rebased
+    if log.truth is not None:
+        log.truth.values    # scored at the end: a bad truth.csv is said now, not after three runs
     log = rebased(log)  # Log.t_origin
     from odomgraph.analysis.plots import overview_figure
     from odomgraph.analysis.report import write_report

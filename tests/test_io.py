@@ -212,3 +212,18 @@ def test_a_log_with_its_truth_unread_pickles_with_the_rows(paper_log_dir):
     back = pickle.loads(pickle.dumps(log))
     assert back.truth.loaded
     np.testing.assert_array_equal(back.truth.t, log.truth.t)
+
+
+def test_a_log_on_a_real_clock_with_its_truth_is_rebased(paper_log):
+    """rebased shifts the truth too (it is not a dataclass since it is read on first use)."""
+    from dataclasses import replace as rep
+    from odomgraph.io.log import Truth, rebased
+    o = 1_700_000_000
+    shifted = paper_log.with_(**{k: rep(getattr(paper_log, k), t=getattr(paper_log, k).t + o)
+                                 for k in ("encoders", "gps", "gyro")},
+                              truth=Truth(paper_log.truth.t + o, paper_log.truth.values))
+    back = rebased(shifted)
+    assert back.t_origin == o
+    np.testing.assert_allclose(back.truth.t, paper_log.truth.t, atol=1e-6)
+    cut = back.truncated(30.0)
+    assert cut.truth.t[-1] <= 30.0

@@ -170,3 +170,19 @@ def test_a_pause_in_wheel_speeds_adds_no_error_and_no_flag(method):
         return float(np.sqrt(np.mean((est.mean[out, 0] - log.truth.at("x", t)) ** 2
                                      + (est.mean[out, 1] - log.truth.at("y", t)) ** 2)))
     assert rms_outside(b, held) < 1.5 * rms_outside(a, plain) + 0.01
+
+
+def test_a_stream_finds_a_short_pause_as_the_whole_log_does():
+    """A 14 s pause: the encoder row spanning it is stamped at its midpoint,
+    so no step is longer than 10 s. A stream does not know the log's pauses
+    in advance (its warm-up has none); the row's interval says it."""
+    from odomgraph.estimators.ekf import EKF
+    log = paused(_log("yard", 23, Rates(encoders=20.0, gyro=50.0, gps=5.0), 80.0), 41.0, 14.0)
+    whole = EKF(log)
+    assert whole.pause_spans
+    a = whole.run()
+    live = EKF(log)
+    live.pause_spans = []                      # as a stream's, whose measurements grow
+    b = live.run()
+    np.testing.assert_array_equal(a.mean, b.mean)
+    assert [n for n in b.notes if "pauses" in n] == [n for n in a.notes if "pauses" in n] != []

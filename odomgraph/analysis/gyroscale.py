@@ -28,6 +28,9 @@ STEP = 0.01
 #: The gyro scale's sigma when the log does not determine it [-]: a MEMS
 #: gyro's scale factor error is typically under 1 %.
 PRIOR = 0.01
+#: A g_hat further than this from 1 is no scale error (a unit or mounting
+#: mistake: analysis.mounting): not determined, not corrected.
+MAX_OFF = 0.1
 #: Corrected when g_hat is this many sigma from 1, and at least MIN_OFF.
 N_SIGMA = 3.0
 MIN_OFF = 0.002

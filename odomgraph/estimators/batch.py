@@ -696,8 +696,8 @@ def window_warnings(prob: Problem, schedule: Schedule) -> list[str]:
         return []
     t0 = float(prob.kf.t[0]) if prob.init is None else None
     start = prob.init.t if prob.init is not None else t0
-    return (in_window(schedule.slip_stretches(prob.init.slipping), start, start + schedule.calibrate_until)[1]
-            if prob.init else [])
+    # (the schedule's own stretches are the pipeline's, which says why: analysis.windowfit)
+    return in_window(prob.init.slipping, start, start + schedule.calibrate_until)[1] if prob.init else []
 
 
 def measurement_counts(prob: Problem) -> dict[str, int]:

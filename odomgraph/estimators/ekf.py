@@ -277,6 +277,13 @@ class EKF:
         self.pauses: list[tuple[float, float]] = []           # (start, end) [s] of each pause crossed
         self.pause_travel: list[tuple[float, float, float]] = []  # (t, distance [m], turn [rad]) across them
 
+    def __setstate__(self, state: dict) -> None:
+        # a checkpoint written before pauses were handled has none of their state
+        state.setdefault("pause_spans", [])
+        state.setdefault("pauses", [])
+        state.setdefault("pause_travel", [])
+        self.__dict__.update(state)
+
     # ------------------------------------------------------------ predict
     def predict(self, t: float) -> None:
         """Propagate state and covariance to absolute time t (paper eq. 2-7)."""
@@ -466,11 +473,13 @@ class EKF:
         self.held_t: dict[str, list] = {}     # sensor -> times of the measurements held out as a jump
         self._rearm: set[tuple] = set()       # sensors whose hold expired: no new jump until one is accepted
         self.recoveries: list[str] = []
+        self.pauses, self.pause_travel = [], []
         obs = self.init.observability
         self._pinned = bool(obs.unobservable)
         # The schedule's window, less where the fixes say the wheels slipped (slipcheck).
-        self.slipping, self.window_warnings = in_window(sch.slip_stretches(self.init.slipping), m.t_start,
-                                                        self.t_switch)
+        # (the schedule's own stretches are the pipeline's, which says why: analysis.windowfit)
+        self.slipping = in_window(sch.slip_stretches(self.init.slipping), m.t_start, self.t_switch)[0]
+        self.window_warnings = in_window(self.init.slipping, m.t_start, self.t_switch)[1]
         # A start with no heading (standing still, no [initial]): fixes must not
         # make one up (estimators.heading). Until the motion shows it, they
         # are taken with the heading considered and the position floored.
@@ -494,13 +503,20 @@ class EKF:
 
     def step(self, t: float, code: int, z, *aux, in_slip: bool = False) -> float:
         """Predict to t [s] and process one measurement of sensor ``code``
-        (sensors.WHEEL ...): wheels (speeds (2,) [m/s], their sigma (2,)),
-        gyro (rate (1,) [rad/s]), GPS (antenna x, y (2,) [m], sigma [m]),
-        range ((1,) [m], beacon x, y (2,) [m], beacon id) or velocity
-        ((v, omega) (2,)). ``in_slip``: t lies where the wheels slipped
-        inside the calibration window (no zero-slip pseudo-update).
-        Returns the NIS, negative when the gate rejected it."""
+        (sensors.WHEEL ...): wheels (speeds (2,) [m/s], their sigma (2,),
+        and the encoder row's interval [s], 0 for wheel_speeds.csv), gyro
+        (rate (1,) [rad/s]), GPS (antenna x, y (2,) [m], sigma [m]), range
+        ((1,) [m], beacon x, y (2,) [m], beacon id) or velocity ((v, omega)
+        (2,)). ``in_slip``: t lies where the wheels slipped inside the
+        calibration window (no zero-slip pseudo-update). Returns the NIS,
+        negative when the gate rejected it."""
         sch, opt = self.schedule, self.options
+        if code == WHEEL and len(aux) > 1 and aux[1] > PAUSE_S \
+                and self.t <= t - 0.5 * aux[1] + min(0.5, 0.05 * aux[1]):
+            # An encoder row over a long interval with nothing else since it
+            # began, stamped at its midpoint: a pause, as pause_spans would
+            # have found had the log been known (a stream's is not).
+            self.pause_spans = sorted({*self.pause_spans, (t - 0.5 * aux[1], t + 0.5 * aux[1])})
         self.predict(t)
         if self.switch_sigma is None and self.t_switch is not None and t >= self.t_switch:
             # The schedule switches: from here on every update holds the scale factors.

@@ -171,9 +171,19 @@ class Truth:
         """Whether the rows have been read (see ``file``)."""
         return self._load is None
 
-    def cut(self, keep: np.ndarray) -> "Truth":
-        """The rows where ``keep`` (N,) is true."""
-        return Truth(self.t[keep], {k: v[keep] for k, v in self.values.items()})
+    def _then(self, f) -> "Truth":
+        """This truth with ``f(t, values) -> (t, values)`` applied, read no sooner than this one."""
+        if self.loaded:
+            return Truth(*f(self._t, self._values))
+        return Truth.file(lambda: f(*self._loaded()))
+
+    def cut_before(self, t_end: float) -> "Truth":
+        """The rows with t <= t_end [s] (Log.truncated), read no sooner than this one."""
+        return self._then(lambda t, v: (t[t <= t_end], {k: a[t <= t_end] for k, a in v.items()}))
+
+    def shifted(self, dt: float) -> "Truth":
+        """The same rows with t + dt [s] (io.log.rebased), read no sooner than this one."""
+        return self._then(lambda t, v: (t + dt, v))
 
 
 @dataclass(frozen=True)
@@ -218,9 +228,9 @@ class Log:
         def cut(obj):
             if obj is None:
                 return None
-            keep = obj.t <= t_end
             if isinstance(obj, Truth):
-                return obj.cut(keep)
+                return obj.cut_before(t_end)
+            keep = obj.t <= t_end
             kw = {k: (v[keep] if isinstance(v, np.ndarray) else v) for k, v in obj.__dict__.items()}
             return type(obj)(**kw)
         return replace(self, **{k: cut(getattr(self, k)) for k in (*SENSOR_FILE, "truth")})
@@ -535,7 +545,9 @@ def rebased(log: Log) -> Log:
     o = int(np.floor(log.t_start))
 
     def shift(obj):
-        return None if obj is None else replace(obj, t=obj.t - o)
+        if obj is None:
+            return None
+        return obj.shifted(-o) if isinstance(obj, Truth) else replace(obj, t=obj.t - o)
     return replace(log, t_origin=log.t_origin + o,
                    **{k: shift(getattr(log, k)) for k in (*_FILES,)})
 
