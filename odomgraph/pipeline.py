@@ -42,17 +42,30 @@ def estimate(log: Log, method: Method = Method.ekf, schedule: Schedule = Schedul
         if time_offset:
             return _with_time_offset(log, method, sch, prog, {**options, "fit_noise": fit_noise})
         return _estimate_checked(log, method, sch, prog, options, fit_noise)
-    est = _with_window_slip(run(schedule, progress), log, schedule, run, method)
+    est = _with_sideways(_with_window_slip(run(schedule, progress), log, schedule, run, method))
     for e in (est, est.online):
         if e is not None:
             e.t_origin = log.t_origin
     return est
 
 
+def _with_sideways(est: Estimate) -> Estimate:
+    """``est``, flagged when its rows moved the robot sideways
+    (analysis.sideways: fixes with a smooth bias, which every estimator
+    follows)."""
+    from odomgraph.analysis import sideways
+    found = sideways.stretches(est)
+    if found:
+        line = sideways.warning(found)
+        est.warnings.insert(0, line)
+        est.flags.append(line)
+    return est
+
+
 def _diverged_in_window(message: str, log: Log, schedule: Schedule) -> bool:
     """Whether a divergence message's time (``at t=...``) lies inside the
     calibration window or a few seconds after it (where a window's wrong
-    scale factors show), or names none."""
+    scale factors show); a message without a time is not (not retried)."""
     import re
     m = re.search(r"at t=(-?[0-9.]+) s", message)
     if m is None:

@@ -511,8 +511,9 @@ class EKF:
         calibration window (no zero-slip pseudo-update). Returns the NIS,
         negative when the gate rejected it."""
         sch, opt = self.schedule, self.options
-        if code == WHEEL and len(aux) > 1 and aux[1] > PAUSE_S \
-                and self.t <= t - 0.5 * aux[1] + min(0.5, 0.05 * aux[1]):
+        # an encoder row whose ticks span more than a pause's length
+        long_row = code == WHEEL and len(aux) > 1 and aux[1] > PAUSE_S
+        if long_row and self.t <= t - 0.5 * aux[1] + min(0.5, 0.05 * aux[1]):
             # An encoder row over a long interval with nothing else since it
             # began, stamped at its midpoint: a pause, as pause_spans would
             # have found had the log been known (a stream's is not).
@@ -534,7 +535,7 @@ class EKF:
             if hw.known:
                 self.heading_known_at = hw.t_known
                 self.heading_watch = hw = None
-        if code == WHEEL and len(aux) > 1 and aux[1] > PAUSE_S and self.pauses \
+        if long_row and self.pauses \
                 and min(t + 0.5 * aux[1], self.pauses[-1][1]) - max(t - 0.5 * aux[1], self.pauses[-1][0]) > 0:
             # An encoder row spanning a pause: its ticks are the travel across
             # it, not a speed at its midpoint (see _pause).

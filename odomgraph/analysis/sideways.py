@@ -1,0 +1,104 @@
+"""An estimate that moved the robot sideways.
+
+A wheeled robot, differential drive or skid-steer, does not move sideways:
+its body's velocity lies along its heading, apart from a skid-steer's
+instantaneous centre of rotation a few centimetres off the axle (a
+sideways creep of that offset times the angle turned). The models say so
+only softly (the pose's process noise), so where the fixes move sideways
+together, as a GNSS multipath bias of 0.5-1 m held for seconds does, every
+estimator follows them: a probe had batch and isam2 0.8 m off at z 82,
+status ``ok``, because such a bias is smooth and steps by less than the
+EKF's jump check (ekf.EKFOptions.jump_speed) can tell from motion.
+
+The estimate itself shows it. ``stretches`` integrates each row step's
+displacement across the row's heading (body frame, at the mean heading of
+the step) and looks at it over windows of 3, 6 and 12 s: on clean
+simulated logs (both scenarios, fixes at 1-20 Hz) no smoother's window
+exceeded 0.06 m and no filter's 0.76 m at z 2.7, while a 0.6 m bias moved
+the smoothers 0.2-0.45 m sideways at z 11-52. A window is a finding when
+its sideways move exceeds both SIDE_M and Z_SIDE times what the rows' own
+sigmas allow (both ends' position sigma and the heading's over the
+distance driven). The pipeline flags the estimate: its rows there follow
+the fixes, or the robot really skidded sideways, or a lever arm is wrong
+(a wrong lever arm moves the body sideways in every turn).
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from odomgraph import state as S
+
+#: Windows over which the sideways move is summed [s]: a bias's onset is
+#: spread by a smoother over several seconds, a filter's over one.
+WINDOWS = (3.0, 6.0, 12.0)
+#: A sideways move below this is never a finding [m]: a skid-steer robot's
+#: centre of rotation sits up to ~0.1 m off the axle, which moves the axle
+#: sideways by that much per radian turned.
+SIDE_M = 0.15
+#: ...nor below this many sigmas of the rows (clean logs: at most 9.1, at
+#: 0.035 m, on a smoother inside the calibration window).
+Z_SIDE = 8.0
+#: A window whose rows' heading sigma exceeds this [rad] has no meaningful
+#: "sideways" (a filter that does not know its heading yet).
+HEADING_SIGMA_MAX = 0.1
+#: A window with a step between rows longer than this [s] is skipped: across
+#: a gap or a pause the path's shape is not measured.
+ROW_GAP_MAX = 2.0
+
+
+def stretches(est) -> list[tuple[float, float, float, float]]:
+    """(start [s], end [s], sideways move [m], in sigmas) of the windows of
+    ``est`` (an Estimate: rows (N,) t, (N, 11) mean and sigma, state.NAMES
+    order, world frame) in which the rows moved sideways, merged where they
+    overlap (the largest move kept); [] when none did."""
+    t = np.asarray(est.t, float)
+    if len(t) < 3:
+        return []
+    X, sd = est.mean, est.sigma
+    th = X[:, S.THETA]
+    dx, dy = np.diff(X[:, S.X]), np.diff(X[:, S.Y])
+    th_mid = th[:-1] + 0.5 * np.angle(np.exp(1j * np.diff(th)))
+    side = np.concatenate([[0.0], np.cumsum(-np.sin(th_mid) * dx + np.cos(th_mid) * dy)])
+    path = np.concatenate([[0.0], np.cumsum(np.hypot(dx, dy))])
+    gap = np.concatenate([[0], np.cumsum(np.diff(t) > ROW_GAP_MAX)])
+    pos_sd = np.hypot(sd[:, S.X], sd[:, S.Y])
+    found: list[tuple[float, float, float, float]] = []
+    for w in WINDOWS:
+        j = np.searchsorted(t, t + w)
+        i = np.flatnonzero(j < len(t))
+        j = j[i]
+        ok = (gap[j] == gap[i]) & (sd[i, S.THETA] < HEADING_SIGMA_MAX) & (sd[j, S.THETA] < HEADING_SIGMA_MAX)
+        i, j = i[ok], j[ok]
+        move = side[j] - side[i]
+        # what the rows allow: each end's position sigma, and the heading's
+        # sigma turning the distance driven into a sideways one
+        allow = np.sqrt(pos_sd[i] ** 2 + pos_sd[j] ** 2
+                        + ((path[j] - path[i]) * np.maximum(sd[i, S.THETA], sd[j, S.THETA])) ** 2)
+        z = np.abs(move) / np.maximum(allow, 1e-9)
+        hit = (np.abs(move) > SIDE_M) & (z > Z_SIDE)
+        found += [(float(t[a]), float(t[b]), float(m), float(q)) for a, b, m, q in
+                  zip(i[hit], j[hit], move[hit], z[hit])]
+    return _merged(found)
+
+
+def _merged(found):
+    """Overlapping windows as one stretch, keeping the largest move's size."""
+    out: list[tuple[float, float, float, float]] = []
+    for a, b, m, z in sorted(found):
+        if out and a <= out[-1][1]:
+            a0, b0, m0, z0 = out[-1]
+            big = (m, z) if abs(m) > abs(m0) else (m0, z0)
+            out[-1] = (a0, max(b, b0), *big)
+        else:
+            out.append((a, b, m, z))
+    return out
+
+
+def warning(found: list[tuple[float, float, float, float]]) -> str:
+    """The line naming the stretches (at most five)."""
+    spans = ", ".join(f"{a:.1f}-{b:.1f} s ({abs(m):.2f} m, {z:.0f} sigma)"
+                      for a, b, m, z in found[:5])
+    more = f" and {len(found) - 5} more" if len(found) > 5 else ""
+    return (f"the estimate moved the robot sideways, which its wheels cannot do, at {spans}{more}: its rows "
+            "there follow the fixes (a GNSS multipath bias, a mocap marker that slid), or the robot skidded "
+            "sideways, or a lever arm is wrong; rows there may be off by that much; not trustworthy")
