@@ -18,9 +18,15 @@ exceeded 0.06 m and no filter's 0.76 m at z 2.7, while a 0.6 m bias moved
 the smoothers 0.2-0.45 m sideways at z 11-52. A window is a finding when
 its sideways move exceeds both SIDE_M and Z_SIDE times what the rows' own
 sigmas allow (both ends' position sigma and the heading's over the
-distance driven). The pipeline flags the estimate: its rows there follow
-the fixes, or the robot really skidded sideways, or a lever arm is wrong
-(a wrong lever arm moves the body sideways in every turn).
+distance driven). The pipeline then runs the estimator again with the fixes of
+those stretches held out: when the fixes there sit more than 4 sigma off
+the new estimate, second after second (analysis.windowfit.stretches), and
+the new estimate moves nothing sideways, the fixes were biased: the new
+estimate stands, the fixes counted as rejected and the recovery said.
+Otherwise the first estimate is flagged: its rows there follow the fixes,
+or the robot really skidded sideways (the fixes after the stretch then
+stay off the wheels' path, and the new estimate moves sideways at its
+end), or a lever arm is wrong (it moves the body sideways in every turn).
 """
 from __future__ import annotations
 
@@ -41,6 +47,12 @@ Z_SIDE = 8.0
 #: A window whose rows' heading sigma exceeds this [rad] has no meaningful
 #: "sideways" (a filter that does not know its heading yet).
 HEADING_SIGMA_MAX = 0.1
+#: At most this share of the fixes is held out to look again (more is no
+#: local bias; the estimate is flagged instead).
+HELD_MAX = 0.4
+#: The fixes held out reach this far before and after a stretch [s]: a
+#: smoother spreads the bias's onset, and the ramp's first fixes pull too.
+HELD_PAD = 3.0
 #: A window with a step between rows longer than this [s] is skipped: across
 #: a gap or a pause the path's shape is not measured.
 ROW_GAP_MAX = 2.0
@@ -102,3 +114,13 @@ def warning(found: list[tuple[float, float, float, float]]) -> str:
     return (f"the estimate moved the robot sideways, which its wheels cannot do, at {spans}{more}: its rows "
             "there follow the fixes (a GNSS multipath bias, a mocap marker that slid), or the robot skidded "
             "sideways, or a lever arm is wrong; rows there may be off by that much; not trustworthy")
+
+
+def recovered(found, biased, n: int) -> str:
+    """The line when the run without the stretches' ``n`` fixes stood:
+    ``biased`` are the seconds whose fixes sat off it (windowfit.stretches)."""
+    spans = ", ".join(f"{a:.1f}-{b:.1f} s ({abs(m):.2f} m)" for a, b, m, _ in found[:5])
+    off = ", ".join(f"{a:.1f}-{b:.1f} s" for a, b in biased[:5])
+    return (f"the estimate moved the robot sideways, which its wheels cannot do, at {spans}: the fixes there "
+            f"pulled it; run again without them, the fixes at {off} sat more than 4 of their sigma off the "
+            f"wheels' path (a GNSS multipath bias): those {n} fixes held out, the rows there dead-reckoned")

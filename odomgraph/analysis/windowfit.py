@@ -35,11 +35,15 @@ PAD_BEFORE = 3.0
 PAD_AFTER = 2.0
 
 
-def stretches(est, log, t_start: float, t_switch: float | None, gps_scale: float = 1.0) -> list[tuple[float, float]]:
+def stretches(est, log, t_start: float, t_switch: float | None, gps_scale: float = 1.0,
+              rows: bool = True) -> list[tuple[float, float]]:
     """(start, end) [s] of the stretches of the calibration window [t_start,
     t_switch) where the GPS fixes sat far from ``est`` (an Estimate of ``log``)
     for MIN_RUN seconds or more; [] without GPS or a window. ``gps_scale``:
-    the factor the run widened the fixes' sigma by (noise_scales)."""
+    the factor the run widened the fixes' sigma by (noise_scales). Without
+    ``rows`` the distance is measured in the fixes' sigma alone: whether the
+    fixes sit off the estimate's path by more than their noise, where the
+    rows' own sigma is a dead reckoning's (analysis.sideways)."""
     from odomgraph.analysis.metrics import gps_residuals
     if t_switch is None or log.gps is None or len(est.t) < 2:
         return []
@@ -56,7 +60,7 @@ def stretches(est, log, t_start: float, t_switch: float | None, gps_scale: float
     xy = np.stack([log.gps.x, log.gps.y], -1)[(log.gps.t >= est.t[0]) & (log.gps.t <= est.t[-1])][inside]
     fresh = np.concatenate([[True], np.any(np.diff(xy, axis=0) != 0.0, axis=1)])
     t, r, sig = t[fresh], r[fresh], sig[fresh]
-    row = np.hypot(np.interp(t, est.t, est.sigma[:, 0]), np.interp(t, est.t, est.sigma[:, 1]))
+    row = np.hypot(np.interp(t, est.t, est.sigma[:, 0]), np.interp(t, est.t, est.sigma[:, 1])) if rows else 0.0
     u = np.hypot(r[:, 0], r[:, 1]) / np.sqrt(sig**2 + row**2)
     sec = np.floor(t - t_start).astype(int)
     n = np.bincount(sec)
