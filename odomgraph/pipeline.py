@@ -64,8 +64,8 @@ def _with_sideways(est: Estimate, log: Log, schedule: Schedule, run, method: Met
     if not found:
         return est
 
-    def flagged(why: str = "") -> Estimate:
-        line = sideways.warning(found) + why
+    def flagged() -> Estimate:
+        line = sideways.warning(found, fixes=log.gps is not None and len(log.gps.t) > 0)
         est.warnings.insert(0, line)
         est.flags.append(line)
         return est
@@ -896,6 +896,11 @@ def _gyro_scale(log: Log, est: Estimate, schedule: Schedule, options: dict) -> d
         for g in (1.0 - G.STEP, 1.0, 1.0 + G.STEP):
             profile(g)
     except OdomgraphError as exc:
+        # Not measured, so derived: the track fitted against a gyro that
+        # reads g times the rate is the true track over g, so |d scale_track
+        # / d g| = 1 at g = 1 (the sign does not matter to a consider term),
+        # and the wheels' scales, fitted against the fixes' distance, do not
+        # depend on g.
         return {"value": 1.0, "sigma": G.PRIOR, "determined": False, "corrected": False,
                 "sensitivity": [0.0, 0.0, 1.0],
                 "line": f"the gyro's scale factor could not be profiled ({' '.join(str(exc).split())}): "

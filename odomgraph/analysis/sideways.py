@@ -106,14 +106,18 @@ def _merged(found):
     return out
 
 
-def warning(found: list[tuple[float, float, float, float]]) -> str:
-    """The line naming the stretches (at most five)."""
+def warning(found: list[tuple[float, float, float, float]], fixes: bool = True) -> str:
+    """The line naming the stretches (at most five); ``fixes``: whether the
+    log has GPS fixes to blame."""
     spans = ", ".join(f"{a:.1f}-{b:.1f} s ({abs(m):.2f} m, {z:.0f} sigma)"
                       for a, b, m, z in found[:5])
     more = f" and {len(found) - 5} more" if len(found) > 5 else ""
-    return (f"the estimate moved the robot sideways, which its wheels cannot do, at {spans}{more}: its rows "
-            "there follow the fixes (a GNSS multipath bias, a mocap marker that slid), or the robot skidded "
-            "sideways, or a lever arm is wrong; rows there may be off by that much; not trustworthy")
+    why = ("its rows there follow the fixes (a GNSS multipath bias, a mocap marker that slid), or the robot "
+           "skidded sideways, or a lever arm is wrong" if fixes else
+           "with no fixes to pull them, the estimator's own corrections moved its rows there (through the "
+           "position's correlation with the speed and scale states), or a lever arm is wrong")
+    return (f"the estimate moved the robot sideways, which its wheels cannot do, at {spans}{more}: {why}; rows "
+            "there may be off by that much; not trustworthy")
 
 
 def recovered(found, biased, n: int) -> str:
