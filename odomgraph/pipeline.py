@@ -71,12 +71,15 @@ def _with_sideways(est: Estimate, log: Log, schedule: Schedule, run, method: Met
         est.flags.append(line)
         return est
     g = log.gps
-    if (method is Method.ekf or g is None or est.time_offsets.get("gps")
+    if (method is Method.ekf or g is None or est.flags or est.time_offsets.get("gps")
             or any("inside the calibration window" in w for w in est.warnings)):
         # The EKF is flagged, not run again (as for the window's slip): its
         # rows are causal, and on a probe's log its run without the fixes
-        # came out 2 m off at z 39. No fixes: none to blame. A second look
-        # at the window, or a clock offset: a run again would not repeat them.
+        # came out 2 m off at z 39. No fixes: none to blame. An estimate
+        # flagged already has a cause the fixes may not be (encoder rows
+        # lost with their ticks move it sideways too, and holding the good
+        # fixes out would be the wrong remedy). A second look at the window,
+        # or a clock offset: a run again would not repeat them.
         return flagged()
     held = np.zeros(len(g.t), bool)
     pad = sideways.HELD_PAD
