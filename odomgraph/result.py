@@ -79,8 +79,9 @@ class Estimate:
     range_bias: dict[str, dict[str, float]] | None = None
     """Estimated constant range bias per beacon id, {"value", "sigma"} [m] (batch --range-bias)."""
     held_out: dict[str, np.ndarray] = field(default_factory=dict)
-    """Times [s] of the measurements held out as a sensor's jump (a GPS
-    multipath burst: ekf.EKFOptions.jump_speed), per sensor; counted in
+    """Times [s] of the measurements held out, per sensor: as a sensor's
+    jump (a GPS multipath burst: ekf.EKFOptions.jump_speed), or as fixes
+    that pulled the rows sideways (analysis.sideways); counted in
     ``rejected`` too."""
     t_origin: int = 0
     """``t`` counts seconds from this integer second of the log's clock (Log.t_origin)."""

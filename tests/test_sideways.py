@@ -90,6 +90,9 @@ def test_fixes_biased_sideways_are_flagged(scenario, seed, hz, amp, span, method
         # its rows honest (the clean log's reach z 4-7) and off by well
         # under the bias (the rows there are dead-reckoned: 0.24 m at z 2.8)
         assert side and status_of(est)[0] == "degraded", (z, est.flags)
+        if method == "batch" and scenario == "paper":
+            # (the run without the biased fixes stands here: its path is exercised)
+            assert held, est.flags
         if held:
             assert z < 10.0 and err.max() < 0.4 * abs(amp), (z, err.max(), held)
             assert est.rejected["gps"] == len(est.held_out["gps"]) > 0
@@ -117,4 +120,5 @@ def test_a_bias_longer_than_what_was_held_out_stays_flagged():
     from odomgraph.sim.scenarios import paper
     clean = inject(paper(90.0), Faults(), 44)
     est = estimate(_biased(clean, 45.0, 75.0, 0.6), "batch", Schedule(20.0))
-    assert _z(est, clean) < 5.0 or status_of(est)[0] == "degraded", (_z(est, clean), est.flags)
+    side = [f for f in est.flags if "sideways" in f]
+    assert side and status_of(est)[0] == "degraded", (_z(est, clean), est.flags)

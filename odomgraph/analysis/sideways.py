@@ -18,17 +18,17 @@ exceeded 0.06 m and no filter's 0.76 m at z 2.7, while a 0.6 m bias moved
 the smoothers 0.2-0.45 m sideways at z 11-52. A window is a finding when
 its sideways move exceeds both SIDE_M and Z_SIDE times what the rows' own
 sigmas allow (both ends' position sigma and the heading's over the
-distance driven). The pipeline then runs the estimator again with the fixes of
-those stretches held out: when the fixes there sit more than 4 sigma off
-the new estimate, second after second (analysis.windowfit.stretches), and
-the new estimate moves nothing sideways, the fixes were biased: the new
-estimate stands, the fixes counted as rejected, and it is still flagged
-(a probe: a 30 s bias seen only at its start had the good fixes before it
-held out and the rows after it following the bias, 0.63 m off at z 99; a
-robot really pushed sideways was taken for a bias). Otherwise the first estimate is flagged: its rows there follow the fixes,
-or the robot really skidded sideways (the fixes after the stretch then
-stay off the wheels' path, and the new estimate moves sideways at its
-end), or a lever arm is wrong (it moves the body sideways in every turn).
+distance driven). The pipeline flags the estimate: its rows there follow the fixes, or
+the robot really was pushed sideways, or a lever arm is wrong (it moves
+the body sideways in every turn). Batch and isam2 first run again with the
+fixes of those stretches held out: where the held fixes sit more than 4
+of their own sigma off the new path, second after second
+(analysis.windowfit.stretches), they were biased, and the new rows
+replace the first ones when they move nothing sideways; the flag stays
+all the same (a probe: a 30 s bias seen only at its start had the good
+fixes before it held out and the rows after it following the bias, 0.63 m
+off at z 99; a robot really pushed sideways was taken for a bias). With
+fixes below 3 a second, no second has enough of them to tell: flagged only.
 """
 from __future__ import annotations
 
@@ -110,7 +110,7 @@ def _merged(found):
 
 def warning(found: list[tuple[float, float, float, float]], fixes: bool = True) -> str:
     """The line naming the stretches (at most five); ``fixes``: whether the
-    log has GPS fixes to blame."""
+    log has fixes or ranges to blame."""
     spans = ", ".join(f"{a:.1f}-{b:.1f} s ({abs(m):.2f} m, {z:.0f} sigma)"
                       for a, b, m, z in found[:5])
     more = f" and {len(found) - 5} more" if len(found) > 5 else ""
@@ -129,5 +129,5 @@ def recovered(found, biased, n: int) -> str:
     off = ", ".join(f"{a:.1f}-{b:.1f} s" for a, b in biased[:5])
     return (f"the estimate moved the robot sideways, which its wheels cannot do, at {spans}: the fixes there "
             f"pulled it; run again without them, the fixes at {off} sat more than 4 of their sigma off the "
-            f"wheels' path (a GNSS multipath bias): those {n} fixes held out, the rows there dead-reckoned; "
+            f"wheels' path (a GNSS multipath bias): {n} fixes held out, the rows there dead-reckoned; "
             "a bias that outlasts them, or a robot really pushed sideways, would leave rows off: not trustworthy")

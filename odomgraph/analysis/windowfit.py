@@ -82,6 +82,15 @@ def stretches(est, log, t_start: float, t_switch: float | None, gps_scale: float
     return out
 
 
+#: How every line of this module begins (``said``).
+SAID = "inside the calibration window ("
+
+
+def said(line: str) -> bool:
+    """Whether a warning is one of this module's (a second look at the window)."""
+    return line.startswith(SAID) and "the fixes sat more than" in line
+
+
 def warning(found: list[tuple[float, float]], resolved: bool) -> str:
     """The line naming the stretches, and whether the second run took the fixes back."""
     spans = ", ".join(f"{a:.1f}-{b:.1f} s" for a, b in found)
