@@ -77,29 +77,34 @@ def _with_sideways(est: Estimate, log: Log, schedule: Schedule, run, method: Met
     g = log.gps
     if (method in (Method.ekf, Method.fixed_lag) or g is None or est.flags or est.time_offsets.get("gps")
             or any(windowfit.said(w) for w in est.warnings)):
-        # The EKF is flagged, not run again (as for the window's slip): its
-        # rows are causal, and on a probe's log its run without the fixes
-        # came out 2 m off at z 39. So is fixed-lag: a hole longer than its
-        # lag has its rows written from the fixes before it alone (2.2 m
-        # off at z 8 on a test's log, against 0.8 m with the bias). No
-        # fixes: none to blame. An estimate
-        # flagged already has a cause the fixes may not be (encoder rows
-        # lost with their ticks move it sideways too, and holding the good
-        # fixes out would be the wrong remedy). A second look at the window,
-        # or a clock offset: a run again would not repeat them.
+        # Flagged, not run again:
+        # - the EKF (as for the window's slip): its rows are causal; run
+        #   without the fixes on a probe's log it came out 2 m off at z 39;
+        # - fixed-lag: across a hole longer than its lag its rows come from
+        #   the fixes before it alone (2.2 m off at z 8 on a test's log,
+        #   against 0.8 m with the bias);
+        # - no fixes: none to blame;
+        # - flagged already: the cause may not be the fixes (encoder rows
+        #   lost with their ticks move it sideways too);
+        # - a clock offset or a second look at the window: a run would not repeat them.
         return flagged()
-    held = np.zeros(len(g.t), bool)
+
+    def within(spans) -> np.ndarray:
+        """(M,) mask of the fixes inside any of the (start, end) spans [s]."""
+        out = np.zeros(len(g.t), bool)
+        for a, b in spans:
+            out |= (g.t >= a) & (g.t <= b)
+        return out
     pad = sideways.HELD_PAD
-    for a, b, _, _ in found:
-        held |= (g.t >= a - pad) & (g.t <= b + pad)
+    held = within([(a - pad, b + pad) for a, b, _, _ in found])
     if not held.any() or held.sum() > sideways.HELD_MAX * len(g.t):
         return flagged()
 
     def without(drop):
         """The run on the log without the fixes ``drop`` (None: it failed or
         moved sideways again). Its own flags stay with it: a gap made here
-        can flag isam2's and fixed-lag's causal rows across it (dead-reckoned
-        0.65 m off at 4.8 sigma on a probe's log), which is true of them."""
+        can flag isam2's causal rows across it (dead-reckoned 0.65 m off at
+        4.8 sigma on a probe's log), which is true of them."""
         keep = ~drop
         try:
             e = run(schedule, None, log.with_(gps=replace(
@@ -107,11 +112,6 @@ def _with_sideways(est: Estimate, log: Log, schedule: Schedule, run, method: Met
         except OdomgraphError:
             return None
         return None if sideways.stretches(e) else e
-    def within(spans) -> np.ndarray:
-        out = np.zeros(len(g.t), bool)
-        for a, b in spans:
-            out |= (g.t >= a) & (g.t <= b)
-        return out
 
     # Held out, the fixes that sit off the new path by more than their own
     # noise (the rows' sigma there is a dead reckoning's, wide) are the
