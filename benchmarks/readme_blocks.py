@@ -60,8 +60,14 @@ def ekf_throughput(results: Path) -> str:
     diff = max(d[k]["max_abs_state_difference"] for k in ("paper", "yard"))
     return (f"- **Throughput:** {min(best):.2f}–{max(best):.2f}× the updates per second of the same filter built on "
             f"FilterPy's `ExtendedKalmanFilter` (best of interleaved runs; median pairs {min(med):.2f}–"
-            f"{max(med):.2f}×), on the paper and yard logs. The outputs agree to {diff:.1e}.\n\n"
-            f"{_source('ekf_throughput', d)}")
+            f"{max(med):.2f}×), on the paper and yard logs. The outputs agree to {diff:.1e}."
+            + (f" Issue 17's compiled design (numba kernels for predict and update, a prototype in "
+               f"`benchmarks/ekf_compiled.py`, not shipped) ran "
+               f"{_rng([d[k]['compiled_speedup_vs_ours'] for k in ('paper', 'yard')])}× the shipped filter, "
+               f"{_rng([d[k]['compiled_speedup_vs_filterpy'] for k in ('paper', 'yard')])}× FilterPy: short of "
+               "the 10× target, because the event loop it leaves in Python is the rest of the time."
+               if all("compiled_updates_per_s" in d[k] for k in ("paper", "yard")) else "")
+            + f"\n\n{_source('ekf_throughput', d)}")
 
 
 def smoother_accuracy(results: Path) -> str:
@@ -702,6 +708,27 @@ def ekf_accuracy_table(results: Path) -> str:
         "|---|---|---|---|---|---|---|", *rows, "", _source("ekf_accuracy", d)])
 
 
+def compiled_md(d: dict) -> list[str]:
+    """Issue 17's second design (benchmarks/ekf_compiled.py), from ekf_throughput's results (or why there is none)."""
+    rows = [f"| {k} | {r['compiled_updates_per_s']:.0f} | {r['compiled_speedup_vs_ours']:.2f}× | "
+            f"{r['compiled_speedup_vs_filterpy']:.2f}× | {r['compiled_max_abs_state_difference']:.1e} |"
+            for k, r in d.items() if isinstance(r, dict) and "compiled_updates_per_s" in r]
+    if not rows:
+        return ["The compiled design (benchmarks/ekf_compiled.py) was not measured: numba is not installed."]
+    return ["Second design, same runs: predict and update compiled with numba (benchmarks/ekf_compiled.py, "
+            "a prototype, not shipped), the event loop in Python.", "",
+            "| log | compiled updates/s | vs odomgraph EKF | vs FilterPy | max state difference |",
+            "|---|---|---|---|---|", *rows]
+
+
+def profile_md(p: dict) -> list[str]:
+    """The shipped filter's cProfile top functions, from ekf_throughput's results."""
+    return [f"Profile of the shipped filter (cProfile, {p['log']} log, {p['updates']} updates, "
+            f"{p['total_s']:.2f} s under the profiler), top {len(p['top'])} functions by own time:", "",
+            "| function | calls | own time s | share |", "|---|---|---|---|",
+            *(f"| `{r['function']}` | {r['calls']} | {r['own_s']:.3f} | {100 * r['share']:.1f} % |" for r in p["top"])]
+
+
 def ekf_throughput_table(results: Path) -> str:
     d = _load("ekf_throughput", results)
     rows = [f"| {k} | {r['updates']} | {r['ours_updates_per_s']:.0f} | {r['filterpy_updates_per_s']:.0f} | "
@@ -712,7 +739,8 @@ def ekf_throughput_table(results: Path) -> str:
         "| log | updates | odomgraph EKF updates/s | FilterPy EKF updates/s | speed-up | max state difference |",
         "|---|---|---|---|---|---|", *rows, "",
         "Best of the interleaved runs each (`--repeats`); 'updates' counts measurement updates (pseudo-updates "
-        "excluded).", "", _source("ekf_throughput", d)])
+        "excluded).", "", *compiled_md(d), "", *(profile_md(d["profile"]) if "profile" in d else []), "",
+        _source("ekf_throughput", d)])
 
 
 SMOOTHER_STATES = ("x", "y", "slip_left", "slip_right", "scale_left", "scale_right", "scale_track")

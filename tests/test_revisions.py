@@ -68,7 +68,9 @@ def _far_rows(log, rows) -> int:
     return int(np.sum(np.maximum(ex, ey) > 6.0))
 
 
-@pytest.mark.parametrize("seed,method", [(84, "isam2"), (99, "isam2"), (91, "fixed-lag")])
+# (seed 99 runs weekly, with the slow tests: suite time)
+@pytest.mark.parametrize("seed,method", [(84, "isam2"), pytest.param(99, "isam2", marks=pytest.mark.slow),
+                                         (91, "fixed-lag")])
 def test_causal_rows_far_outside_sigma_are_flagged(seed, method):
     """Seed 84 is the benchmark's; 99 and 91 were found by a scan of seeds
     90-99 after the rule was written (every run with rows beyond 6 sigma
