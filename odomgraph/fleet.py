@@ -21,6 +21,7 @@ and fleet.csv / fleet.json with one row per log.
 from __future__ import annotations
 
 import json
+import os
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -132,10 +133,11 @@ def run_job(job: Job) -> tuple[dict, dict[str, bytes]]:
                 row[n] = rep["scale"][w]
         files = {p.relative_to(tmp).as_posix(): p.read_bytes() for p in sorted(tmp.rglob("*")) if p.is_file()}
     except OdomgraphError as exc:
-        row.update(result="failed", error=" ".join(str(exc).split()))
+        # named as in the fleet's output, not in the temporary directory it is written in first
+        row.update(result="failed", error=" ".join(str(exc).replace(f"{tmp}{os.sep}", "").split()))
         files = {}
     except OSError as exc:           # as the CLI's one-line errors: the file and what the system said
-        where = f"{exc.filename}: " if exc.filename else ""
+        where = f"{str(exc.filename).replace(f'{tmp}{os.sep}', '')}: " if exc.filename else ""
         row.update(result="failed", error=f"{where}{exc.strerror or type(exc).__name__}")
         files = {}
     except Exception as exc:         # a solver's failure: this log's, not the fleet's
@@ -175,7 +177,9 @@ def run_fleet(paths, out: Path, kind: str, method, schedule, workers: int | None
     method = getattr(method, "value", method)
     _check_options(kind, method, options)
     logs = log_dirs(paths)
-    check_output(out, logs)
+    # the directories named too: an output inside a directory of logs would
+    # mix its files with the logs (a single log's inside refused alike)
+    check_output(out, [*logs, *paths])
     names = output_names(logs)
     rows: dict[str, dict] = {}
     with atomic_output_dir(out, logs, kind=f"fleet {kind}") as d:

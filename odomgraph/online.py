@@ -556,7 +556,7 @@ class Online:
     def _filter(self, b: float) -> list[OnlineRow]:
         """Filter the events in [t_done, b)."""
         ekf = self.ekf
-        meas = from_log(self._log(self.t_done - self.context))
+        meas = from_log(self._log(self.t_done - self.context), frozen=False)
         t_ev, code_ev, row_ev = event_stream(meas, self.t_done)
         n = int(np.searchsorted(t_ev, b, side="left"))
         slip = in_stretches(t_ev[:n], ekf.slipping)
@@ -826,7 +826,8 @@ class _Smoother:
         w = self.watch
         if w is None or w.known:
             return
-        meas = from_log(online._log(self._watch_t - online.context if self._watch_t > -math.inf else -math.inf))
+        meas = from_log(online._log(self._watch_t - online.context if self._watch_t > -math.inf else -math.inf),
+                        frozen=False)
         wh = meas.wheel
         t_ev, code_ev, row_ev = event_stream(meas, wh.t[0])
         dt = wh.dt if wh.dt is not None else np.append(np.diff(wh.t), np.median(np.diff(wh.t)) if len(wh.t) > 1

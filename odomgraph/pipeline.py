@@ -65,6 +65,7 @@ def _with_sideways(est: Estimate, log: Log, schedule: Schedule, run, method: Met
     their wide sigma but good fixes lost)."""
     from odomgraph.analysis import sideways, windowfit
     from odomgraph.errors import OdomgraphError
+    from odomgraph.estimators.measurements import runs_of
     found = sideways.stretches(est)
     if not found:
         return est
@@ -126,7 +127,7 @@ def _with_sideways(est: Estimate, log: Log, schedule: Schedule, run, method: Met
         if alt is None:
             return flagged()
         scale = alt.noise_scales.get("gps", {}).get("applied", 1.0)
-        spans = [(float(g.t[i]), float(g.t[j])) for i, j in _runs(held)]
+        spans = [(float(g.t[i]), float(g.t[j])) for i, j in runs_of(held)]
         biased = [(max(a, c), min(b, d)) for a, b in spans
                   for c, d in windowfit.stretches(alt, log, a, b + 1e-9, scale, rows=False)]
         if not biased:
@@ -166,12 +167,6 @@ def _with_sideways(est: Estimate, log: Log, schedule: Schedule, run, method: Met
     alt.warnings.insert(0, line)
     alt.flags.append(line)
     return alt
-
-
-def _runs(mask: np.ndarray) -> list[tuple[int, int]]:
-    """(first, last) index of each run of True in ``mask``."""
-    d = np.diff(np.concatenate([[0], mask.astype(np.int8), [0]]))
-    return list(zip(np.flatnonzero(d == 1), np.flatnonzero(d == -1) - 1))
 
 
 def _diverged_in_window(message: str, log: Log, schedule: Schedule) -> bool:
@@ -639,6 +634,7 @@ def summary(est: Estimate, log: Log, schedule: Schedule) -> dict:
     from odomgraph.observability import combinations_of
     from odomgraph.io.log import rebased
     log = rebased(log)  # on est's clock (Log.t_origin)
+    pinned = est.observability.unobservable if est.observability else {}
     out = {
         "method": est.method,
         "log": str(log.path) if log.path else None,
@@ -654,7 +650,8 @@ def summary(est: Estimate, log: Log, schedule: Schedule) -> dict:
         "unobservable": est.unobservable(),
         # (common, right/left ratio, track) with their sigma as the estimator
         # solved them: with unobservable combinations held at nominal.
-        "scale_combinations": combinations_of(est.mean[-1, S.SCALE], est.scale_cov(given=True)),
+        "scale_combinations": {n: {**c, **({"held_at_nominal": True} if n in pinned else {})} for n, c in
+                               combinations_of(est.mean[-1, S.SCALE], est.scale_cov(given=True)).items()},
         **({"range_bias": est.range_bias} if est.range_bias is not None else {}),
         "nis": nis_summary(est),
         "status": status_of(est)[0],
@@ -1056,10 +1053,11 @@ def calibrate_to_file(log: Log, out: Path, schedule: Schedule = Schedule(calibra
     that predicts held-out data worse than nominal) unless ``force``: a
     CalibrationRejectedError says why. Returns (RobotConfig, report) as
     ``calibrate``."""
-    from odomgraph.io.outdir import atomic_output_file, check_output
+    from odomgraph.io.outdir import atomic_output_file, check_output_file
     from odomgraph.io.robot import robot_toml
     inputs = (log.path,) if log.path else ()
-    check_output(out, inputs, directory=False)
+    # (a file odomgraph did not write is refused now, not after the work: a probe waited 8 s for it)
+    check_output_file(out, inputs, is_ours=_is_calibration_file)
     if not force:
         # A mounting mistake shows in the data before any fit: say it now.
         from odomgraph.analysis.mounting import mounting_warnings

@@ -270,3 +270,17 @@ def test_swapped_encoders_are_named_with_a_slow_gps():
     w = mounting_warnings(log.with_(encoders=replace(e, ticks_left=e.ticks_right, ticks_right=e.ticks_left)))
     assert len(w) == 1 and "encoders look swapped" in w[0], w
     assert mounting_warnings(log) == []
+
+
+@pytest.mark.parametrize("make,seed,off", [(yard, 61, 12.0), (paper, 62, -20.0)])
+def test_a_gps_clock_far_off_is_named_beside_a_backwards_encoder(make, seed, off):
+    """A probe's GPS stamps 5 and 18 s late (GPS time against UTC) were blamed
+    on an encoder counting backwards alone: beyond the +-4 s tried, the clock
+    is now named as the other cause, with its offset; an encoder that does
+    count backwards gets no such suggestion."""
+    log = inject(make(150.0), Faults(), seed)
+    g, e = log.gps, log.encoders
+    w = mounting_warnings(log.with_(gps=replace(g, t=g.t + off)))
+    assert len(w) == 1 and "counts backwards" in w[0] and f"GPS clock is off by about {off:+.0f} s" in w[0], w
+    w = mounting_warnings(log.with_(encoders=replace(e, ticks_right=-e.ticks_right)))
+    assert len(w) == 1 and "counts backwards" in w[0] and "GPS clock" not in w[0], w

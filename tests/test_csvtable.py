@@ -73,6 +73,10 @@ def test_errors_name_the_line_on_either_path(tmp_path):
     p.write_text("t,omega\n0.0,0.1\n\n0.1,0.2\n0.1,0.3\n")
     with pytest.raises(LogFormatError, match=r"gyro.csv:5: time does not increase"):
         C.read_table(p, ("t", "omega"))
+    # real-clock stamps a few ms apart are shown whole, not both as 1.7e+09 (a probe's)
+    p.write_text("t,omega\n1700000000.125,0.1\n1700000000.005,0.2\n")
+    with pytest.raises(LogFormatError, match=r"\(t = 1700000000.005 after 1700000000.125\)"):
+        C.read_table(p, ("t", "omega"))
 
 
 @settings(max_examples=50, deadline=None)

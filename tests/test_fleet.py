@@ -149,3 +149,22 @@ def test_names_are_unique_hidden_entries_skipped_and_reserved_names_avoided(tmp_
         assert output_names(log_dirs(["."])) == ["r1"]
     finally:
         os.chdir(cwd)
+
+
+def test_a_fleet_output_inside_its_directory_of_logs_is_refused(tmp_path, robots):
+    """A probe's `estimate fleet -o fleet/out` wrote its output among the logs
+    (a single log's inside is refused alike); a calibrate fleet's refusal
+    named its temporary file, not the robot's."""
+    logs = tmp_path / "logs"
+    shutil.copytree(robots, logs)
+    before = sorted(p.relative_to(logs).as_posix() for p in logs.rglob("*"))
+    res = run("estimate", logs, "-o", logs / "out")
+    assert res.exit_code == 1 and "inside the input" in res.stderr and "Traceback" not in res.output, res.output
+    assert sorted(p.relative_to(logs).as_posix() for p in logs.rglob("*")) == before
+    # r2 with its gyro on another axis: its calibration is refused, named as in the output
+    g = (logs / "r2" / "gyro.csv").read_text().splitlines()
+    (logs / "r2" / "gyro.csv").write_text("\n".join([g[0], *(f"{ln.split(',')[0]},0.0" for ln in g[1:])]) + "\n")
+    res = run("calibrate", logs / "r1", logs / "r2", "--no-tune", "--workers", "1", "-o", tmp_path / "cal")
+    rows = {r["name"]: r for r in csv.DictReader((tmp_path / "cal" / "fleet.csv").open())}
+    assert rows["r2"]["result"] == "failed", rows["r2"]
+    assert rows["r2"]["error"].startswith("r2.toml not written:") and "odomgraph-fleet-" not in rows["r2"]["error"]

@@ -255,3 +255,19 @@ def test_config2_beats_config1_on_track_width():
     c1 = _ekf_medians(1, (0.6,), (0.05,))[0, 0]
     c2 = _ekf_medians(2, (0.6,), (0.05,))[0, 0]
     assert c2 < 0.35 * c1                       # measured 0.0087 against 0.054 (ratio 0.16)
+
+
+def test_vectorised_ekf_equals_one_run_at_a_time_with_a_pinned_common_scale():
+    """Wheels and gyro without fixes: the common scale is pinned, and both
+    filters keep the encoder gain off it and off the common direction alike
+    (ekf.held_directions)."""
+    from odomgraph.estimators.ekf import EKF, EKFOptions
+    from odomgraph.estimators.ekf_many import run_ekf_many
+    from odomgraph.estimators.schedule import Schedule
+    from odomgraph.sim.scenarios import yard
+    from odomgraph.sim.simulate import simulate
+    logs = [simulate(yard(50.0), s, timing_seed=8).with_(gps=None) for s in (81, 82)]
+    for log, many in zip(logs, run_ekf_many(logs, Schedule(20.0), EKFOptions())):
+        one = EKF(log, Schedule(20.0), EKFOptions()).run()
+        assert "scale_common" in one.observability.unobservable
+        np.testing.assert_allclose(many.mean, one.mean, rtol=0, atol=1e-9)

@@ -32,6 +32,8 @@ MIN_CORRELATION = 0.3
 FIX_CORRELATION = 0.5
 #: The fixes' speed is compared with the wheels' at lags up to this [s].
 MAX_LAG = 4.0
+#: ...and, when none of those agrees, up to this [s], to name a clock far off.
+WIDE_LAG = 30.0
 
 
 #: A wheel reading exactly 0 for this long [s] while the other moves at
@@ -100,6 +102,18 @@ def _fixes_still(log, t0: float, t1: float, wheel_travel: float) -> bool:
     return spread < max(0.25 * wheel_travel, 6.0 * sig)
 
 
+#: A gyro whose bin means vary less than this many times their own noise saw no turn.
+FLAT = 3.0
+
+
+def _noise_sd(x: np.ndarray) -> float:
+    """The noise sigma of a smooth series x (K,), from its successive
+    differences (a robust MAD; the signal's own changes between half-second
+    bins are small against it)."""
+    d = np.diff(x)
+    return float(1.4826 * np.median(np.abs(d - np.median(d))) / np.sqrt(2.0))
+
+
 def _bin_means(t: np.ndarray, x: np.ndarray, width: float) -> np.ndarray:
     """Means of x over consecutive ``width``-second bins of t (empty bins left out)."""
     k = np.floor((t - t[0]) / width).astype(np.int64)
@@ -112,7 +126,7 @@ def mounting_warnings(log) -> list[str]:
     """One line per mounting or wiring mistake that the log shows."""
     from odomgraph.analysis.holdout import wheel_yaw_rate_at_gyro
     fix_c = fix_turn_correlation(log)
-    gyro_c, slope = None, None
+    gyro_c, slope, gyro_flat = None, None, False
     rate = wheel_yaw_rate_at_gyro(log)
     if rate is not None:
         t, g, w = rate
@@ -120,6 +134,7 @@ def mounting_warnings(log) -> list[str]:
         # makes the wheels' rate noise, and a log that barely turns (3 s of
         # straight driving, a probe's) then "correlates" 0.15 with the gyro.
         g, w = _bin_means(t, g, BIN), _bin_means(t, w, BIN)
+        gyro_flat = len(g) > 2 and np.std(g) < FLAT * _noise_sd(g)
         turned = float(np.sum(np.abs(w)) * BIN)
         if len(g) >= MIN_SAMPLES // 3 and np.std(w) >= MIN_TURN and turned >= MIN_TURNED and np.std(g) > 0:
             gyro_c = float(np.corrcoef(g, w)[0, 1])
@@ -141,8 +156,17 @@ def mounting_warnings(log) -> list[str]:
                        f"{c0:.2f} without the shift): the GPS clock is off by about that much; estimate it with "
                        "--time-offset")
         else:
+            # A clock further off than the shifts tried (GPS time runs 18 s
+            # ahead of UTC: a probe's log so was blamed on an encoder alone)
+            # is named as the other cause, not the only one: a periodic path
+            # agrees with itself a period later too.
+            wide = fix_speed_correlation(log, max_lag=WIDE_LAG)
+            late = wide is not None and wide[2] > 0.8 and abs(wide[1]) >= MAX_LAG
             out.append(f"the wheels' speed does not follow the fixes' (correlation {c0:.2f}): one encoder counts "
-                       "backwards, or the encoders are not the wheels the log says")
+                       "backwards, or the encoders are not the wheels the log says"
+                       + (f", or the GPS clock is off by about {wide[1]:+.0f} s (shifted so, the speeds agree: "
+                          f"correlation {wide[2]:.2f}; GPS time runs 18 s ahead of UTC): subtract it from gps.csv's "
+                          "times and run again" if late else ""))
         return out   # the turn checks below would only repeat it under other names
     fixes_against = fix_c is not None and fix_c < -FIX_CORRELATION
     # With the gyro against the wheels too, a weaker no from the fixes is enough
@@ -166,8 +190,15 @@ def mounting_warnings(log) -> list[str]:
         out.append(f"the gyro turns against the wheels (correlation {gyro_c:.2f}): the gyro is mounted upside down "
                    "or its sign is flipped" + ("" if sure else ", or the left and right wheels are swapped"))
     elif abs(gyro_c) < MIN_CORRELATION:
-        out.append(f"the gyro does not follow the wheels' turn rate (correlation {gyro_c:.2f}): its yaw is on another "
-                   "axis than the log says, or it is not in rad/s")
+        # A gyro that saw no turn at all, against wheels that did: either it
+        # does not measure yaw, or the robot drove straight and the wheels'
+        # difference was slip (a probe's straight-line log with slip events
+        # was refused by calibrate so). The fixes' course breaks the tie.
+        if not (gyro_flat and fix_c is not None and fix_c < MIN_CORRELATION):
+            out.append(f"the gyro does not follow the wheels' turn rate (correlation {gyro_c:.2f}): its yaw is on "
+                       "another axis than the log says, or it is not in rad/s"
+                       + (", or the robot drove straight and the wheels' difference was slip"
+                          if gyro_flat and fix_c is None else ""))
     elif gyro_c > 0 and 35.0 < slope < 90.0:
         out.append(f"the gyro reads {slope:.0f}x the wheels' turn rate: it looks like degrees per second, and the "
                    "log must hold rad/s")

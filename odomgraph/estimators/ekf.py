@@ -35,7 +35,7 @@ from odomgraph.errors import EstimatorDivergedError
 from odomgraph.estimators.heading import HeadingWatch, circle_variance
 from odomgraph.estimators.initial import InitialState, initial_state
 from odomgraph.estimators.measurements import PAUSE_S, from_log, pause_spans, slip_intensity
-from odomgraph.observability import decondition
+from odomgraph.observability import decondition, pinned_basis
 from odomgraph.estimators.slipcheck import in_stretches, in_window
 from odomgraph.result import Estimate, Innovations
 from odomgraph.estimators.schedule import Hold, Schedule
@@ -68,6 +68,36 @@ def common_scale_direction(x: np.ndarray) -> np.ndarray:
     u = np.zeros(np.shape(x))
     u[..., SCALE_IDX] = x[..., SCALE_IDX] * np.array([1.0, 1.0, -1.0])
     return u / np.linalg.norm(u, axis=-1, keepdims=True)
+
+
+def held_directions(x: np.ndarray, pinned: np.ndarray, common_pinned: bool) -> np.ndarray:
+    """The direction(s) the encoder update's gain must not move the state
+    along, at state(s) ``x`` (..., 11): the common scale
+    (common_scale_direction), and the pinned scale combinations ``pinned``
+    (3, k) (observability.pinned_basis), held at nominal by their tight prior.
+
+    Taking the common direction out of a gain puts some of it back along a
+    pinned one: on a probe's straight-line log the pinned track moved 4 % in
+    2 s and ended "held at nominal" at 1.038 at a claimed sigma of 0.006
+    (truth 0.90). So the pinned directions are taken out too, and the common
+    one orthogonally to them. With the common scale pinned (``common_pinned``)
+    the wheels see the track against the gyro, and only the pins are held:
+    the common direction lies in the span of the common scale and the track,
+    and taking it out would freeze the track.
+
+    Returns (..., 11) the unit common direction when nothing is pinned (as
+    before pins were held), else (..., 11, m) orthonormal columns."""
+    u = common_scale_direction(x)
+    k = pinned.shape[1]
+    if k == 0:
+        return u
+    out = np.zeros(np.shape(x)[:-1] + (S.N, k + (0 if common_pinned else 1)))
+    out[..., SCALE_IDX, :k] = pinned
+    if not common_pinned:
+        us = u[..., SCALE_IDX]
+        up = us - (us @ pinned) @ pinned.T       # (u is never in the span of the ratio and the track)
+        out[..., SCALE_IDX, k] = up / np.linalg.norm(up, axis=-1, keepdims=True)
+    return out
 
 
 @dataclass(frozen=True)
@@ -114,7 +144,8 @@ class EKFOptions:
     """True: the paper's encoder update (eq. 29-34), whose gain moves the
     scale factors in every direction. False (default): the gain has no
     component along the common scale (common_scale_direction; Joseph form,
-    exact for that gain), which only absolute sensors move, through the
+    exact for that gain), nor along a pinned combination (held_directions),
+    which only absolute sensors move, through the
     correlations the encoder updates build. Wheels measure ticks/m x speed:
     with the yaw rate known, (ticks/m L, R) x (1 + e), track / (1 + e) and
     speed / (1 + e) predict the same ticks, so the wheels carry no
@@ -305,6 +336,9 @@ class EKF:
         self.__dict__.update(state)
         if "_rates" not in state:            # nor the rate noise kept whole
             self._rates = rate_noise(self._q, self._q_slip)
+        if "_pinned" in state and "_held" not in state:     # nor the pins' basis
+            obs = self.init.observability
+            self._held = (pinned_basis(obs), "scale_common" in obs.unobservable)
 
     # ------------------------------------------------------------ predict
     def predict(self, t: float) -> None:
@@ -399,8 +433,9 @@ class EKF:
         While ``self.holding_scale`` is set, the gain rows of the scale
         factors are zero (Schmidt "consider" update): they are held, while
         their uncertainty still enters every other state's covariance.
-        ``no_gain``: a unit (11,) direction the gain must not move the state
-        along (common_scale_direction: the encoder update's), considered the same way.
+        ``no_gain``: a unit (11,) direction, or (11, m) orthonormal ones, the
+        gain must not move the state along (held_directions: the encoder
+        update's), considered the same way.
         """
         P = self.P
         PHt = P[:, idx] @ H.T                    # (n, m)
@@ -417,7 +452,7 @@ class EKF:
         if self.holding_scale:
             K[SCALE_IDX, :] = 0.0
         elif no_gain is not None:
-            K -= np.outer(no_gain, no_gain @ K)
+            K -= np.outer(no_gain, no_gain @ K) if no_gain.ndim == 1 else no_gain @ (no_gain.T @ K)
         if self.consider_heading:
             K[S.THETA, :] = 0.0
         self.x += K @ y
@@ -500,6 +535,7 @@ class EKF:
         self.pauses, self.pause_travel = [], []
         obs = self.init.observability
         self._pinned = bool(obs.unobservable)
+        self._held = (pinned_basis(obs), "scale_common" in obs.unobservable)   # (held_directions)
         # The schedule's window, less where the fixes say the wheels slipped (slipcheck).
         # (the schedule's own stretches are the pipeline's, which says why: analysis.windowfit)
         self.slipping = in_window(sch.slip_stretches(self.init.slipping), m.t_start, self.t_switch)[0]
@@ -578,7 +614,7 @@ class EKF:
             h, H = encoder.wheel_speeds(x[3], x[4], x[6], x[7], x[8], x[9], x[10], self.robot.track_width)  # eq. 29-34
             s = aux[0]
             nis_k = self.update(z, h, H, ENC_IDX, np.diag(s * s),
-                                no_gain=None if opt.encoder_scale_gain else common_scale_direction(x))
+                                no_gain=None if opt.encoder_scale_gain else held_directions(x, *self._held))
             self._check()
         elif code == GYRO:
             h, H = gyro.yaw_rate(x[4], x[5])                                      # eq. 10-11

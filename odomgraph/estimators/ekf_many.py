@@ -22,13 +22,13 @@ from odomgraph.factors._math import wrap_angle
 from odomgraph.factors.motion import propagate
 from odomgraph import state as S
 from odomgraph.errors import EstimatorDivergedError
-from odomgraph.estimators.ekf import (GATE_HISTORY, MAX_RECOVERIES, EKFOptions, common_scale_direction,
+from odomgraph.estimators.ekf import (GATE_HISTORY, MAX_RECOVERIES, EKFOptions, held_directions,
                                       gate_thresholds, jumped, make_estimate, reacquire_widening, watch_widening)
 from odomgraph.estimators.sensors import (DOF, ENC_IDX, GATED, GPS, GYRO, GYRO_IDX, POSE_IDX, RANGE, SCALE_IDX,
                                          SENSOR_NAMES, SLIP_IDX, VEL, VEL_IDX, WHEEL, event_stream)
 from odomgraph.estimators.initial import initial_state
 from odomgraph.estimators.measurements import from_log, slip_intensity
-from odomgraph.observability import decondition
+from odomgraph.observability import decondition, pinned_basis
 from odomgraph.estimators.slipcheck import in_stretches, in_window
 from odomgraph.result import Estimate
 from odomgraph.estimators.schedule import Hold, Schedule
@@ -93,6 +93,7 @@ def run_ekf_many(logs: list[Log], schedule: Schedule = Schedule(), options: EKFO
     _check_same_timing(logs, streams)
     t_ev, code_ev, row_ev = streams[0]
     obs = inits[0].observability
+    pins = (pinned_basis(obs), "scale_common" in obs.unobservable)          # (ekf.held_directions)
     # As ekf.EKF, with the first run's slipping stretches (the runs share their motion).
     r, m0, sch, opt = logs[0].robot, meas[0], schedule, options
 
@@ -183,8 +184,10 @@ def run_ekf_many(logs: list[Log], schedule: Schedule = Schedule(), options: EKFO
             nis = np.where(rej, -nis, nis)
         if holding:
             K[:, SCALE_IDX, :] = 0.0
-        elif no_gain is not None:       # (N, 11) unit directions (EKF.update)
+        elif no_gain is not None and no_gain.ndim == 2:       # (N, 11) unit directions (EKF.update)
             K = K - no_gain[:, :, None] * np.einsum("ni,nij->nj", no_gain, K)[:, None, :]
+        elif no_gain is not None:       # (N, 11, m) orthonormal columns: with pins (ekf.held_directions)
+            K = K - no_gain @ (np.swapaxes(no_gain, 1, 2) @ K)
         x = x + np.einsum("nij,nj->ni", K, y)
         x[:, 2] = wrap_angle(x[:, 2])
         IKH = np.broadcast_to(_I, P.shape).copy()
@@ -226,7 +229,7 @@ def run_ekf_many(logs: list[Log], schedule: Schedule = Schedule(), options: EKFO
                 Rw = np.zeros((n, 2, 2))
                 Rw[:, 0, 0], Rw[:, 1, 1] = s2[:, 0], s2[:, 1]
                 nis = update(wheel_m[:, i], h, H, ENC_IDX, Rw,
-                             no_gain=None if opt.encoder_scale_gain else common_scale_direction(x))
+                             no_gain=None if opt.encoder_scale_gain else held_directions(x, *pins))
                 d = np.diagonal(P, 0, 1, 2)
                 bad = ~(np.isfinite(x).all(1) & np.isfinite(d).all(1)) | (d < -1e-12).any(1)
                 far = (np.abs(x[:, S.SCALE] - 1.0).max(1) > opt.max_scale_error) | (x[:, S.SCALE].min(1) < 0.05)

@@ -166,7 +166,7 @@ def window_piece(raw: Log, t_from: float, t_to: float, keyframe_hz: float, step:
     (both wheel-row stamps), cleaned over all of ``raw`` (which holds some
     context before and after), computed as a whole log's are (causal)."""
     from dataclasses import replace as dc_replace
-    log = clean(raw)[0]
+    log = clean(raw, frozen=False)[0]        # (a live window: measurements.clean)
     if log.encoders is not None:
         e = log.encoders
         m = (e.t >= t_from) & (e.t <= t_to)

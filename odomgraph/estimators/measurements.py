@@ -69,8 +69,8 @@ def pause_spans(meas: Measurements) -> list[tuple[float, float]]:
     return [(float(t[i]), float(t[i + 1])) for i in k]
 
 
-def from_log(log: Log) -> Measurements:
-    """The log's measurements, after ``clean``."""
+def from_log(log: Log, frozen: bool = True) -> Measurements:
+    """The log's measurements, after ``clean`` (``frozen``: see there)."""
     for obj, name in ((log.encoders, "encoders.csv"), (log.wheel_speeds, "wheel_speeds.csv")):
         if obj is not None and np.any(np.diff(obj.t) <= 0):
             from odomgraph.errors import LogFormatError
@@ -78,7 +78,7 @@ def from_log(log: Log) -> Measurements:
                                  "time does not increase (read the log with read_log, which drops rows written "
                                  "twice)")
     notes = []
-    log, spikes = clean(log)
+    log, spikes = clean(log, frozen)
     r = log.robot
     a, b = r.encoder_sigma
     if log.encoders is not None:
@@ -278,15 +278,120 @@ def repeated_fixes(gps) -> np.ndarray:
     return mask
 
 
+#: A run of fixes at one exact position is judged frozen when it lasts at
+#: least this long [s] ...
+FROZEN_MIN_S = 5.0
+#: ... while the gyro turns through at least this much [rad] (its median
+#: over the run taken out: a bias is no turn) ...
+FROZEN_TURN = 0.5
+#: ... the wheels' turn rate follows the gyro's (their 0.5 s means correlate
+#: by this much, or differ by less than FROZEN_DISAGREE of the turn, summed:
+#: a steady arc has no variation to correlate; the wheels roll, they do not
+#: spin in place) ...
+FROZEN_CORRELATION = 0.8
+FROZEN_DISAGREE = 0.3
+#: ... and the wheels drive at least this far [m] (nominal parameters).
+FROZEN_TRAVEL = 2.0
+
+
+def frozen_fixes(log: Log) -> list[tuple[int, int, float, float]]:
+    """Runs of fixes that repeat one position while the robot drove: a
+    receiver that froze (holding its last fix when it lost lock), as
+    (first, last) row indices and the wheels' travel [m] and the gyro's turn
+    [rad] over the run.
+
+    A position held exactly is also what a robot standing still gives (a
+    quantised or static-hold receiver), and that is the evidence of slip
+    that the paper is about: a snowplow whose wheels spin in a drift. So a
+    run is frozen only when the wheels and the gyro agree the robot turned,
+    FROZEN_TURN at least, at the rates the wheels say (FROZEN_CORRELATION, FROZEN_DISAGREE): wheels that spin
+    while the robot stands do not turn it as the gyro sees (the gyro's
+    turn counted after its bias, taken against the wheels' rate over the
+    whole log). On a probe's
+    log a 20 s freeze, taken for a standstill, left every estimator 2.4-4 m
+    off (the mirror solution) once the fixes came back."""
+    g = log.gps
+    if g is None or len(g.t) < 3 or log.gyro is None or len(log.gyro.t) < 10:
+        return []
+    same = np.concatenate([[False], (g.x[1:] == g.x[:-1]) & (g.y[1:] == g.y[:-1])])
+    if same[1:].all():
+        return []            # one position throughout: no fix to keep in its place (repeated_fixes alike)
+    if not same.any():
+        return []
+    # The gyro's bias against the wheels' rate over the whole log (a median:
+    # slip and stalls are the exception). Not over the run: its own median
+    # takes a steady turn out with it, and one against the wheels there makes
+    # a stall's scale mismatch (spinning wheels read a slow turn) a turn the
+    # gyro "agrees" with.
+    ww_all = wheel_yaw_rate(log, log.gyro.t)
+    if ww_all is None:
+        return []
+    bias = float(np.median(log.gyro.omega - ww_all))
+    out = []
+    for a, b in runs_of(same):
+        first = a - 1                      # the run's own fix, then its copies
+        t0, t1 = float(g.t[first]), float(g.t[b])
+        if t1 - t0 < FROZEN_MIN_S:
+            continue
+        gy = log.gyro
+        sel = (gy.t >= t0) & (gy.t <= t1)
+        if sel.sum() < 10:
+            continue
+        tg = gy.t[sel]
+        ww = wheel_yaw_rate(log, tg)
+        wg = gy.omega[sel] - bias
+        turn = float(np.sum(np.abs(wg[:-1]) * np.diff(tg)))
+        bins = np.floor((tg - tg[0]) / 0.5).astype(int)
+        n = np.bincount(bins)
+        mg, mw = (np.bincount(bins, v)[n > 0] / n[n > 0] for v in (wg, ww))
+        if turn < FROZEN_TURN or len(mg) < 4:
+            continue
+        alike = np.sum(np.abs(mg - mw)) <= FROZEN_DISAGREE * np.sum(np.abs(mg))
+        if not alike and not (np.std(mg) > 0 and np.std(mw) > 0
+                              and np.corrcoef(mg, mw)[0, 1] >= FROZEN_CORRELATION):
+            continue
+        travel = _wheel_travel(log, t0, t1)
+        if travel >= FROZEN_TRAVEL:
+            out.append((first, int(b), travel, turn))
+    return out
+
+
+def runs_of(mask: np.ndarray) -> list[tuple[int, int]]:
+    """(first, last) index of each run of True in ``mask`` (K,)."""
+    d = np.diff(np.concatenate([[0], mask.astype(np.int8), [0]]))
+    return list(zip(np.flatnonzero(d == 1), np.flatnonzero(d == -1) - 1))
+
+
+def _wheel_travel(log: Log, t0: float, t1: float) -> float:
+    """Distance the wheels report between t0 and t1 [s] [m], nominal parameters."""
+    r = log.robot
+    if log.encoders is not None and len(log.encoders.t) > 1:
+        e = log.encoders
+        sel = (e.t > t0) & (e.t <= t1)
+        return float(np.sum(np.abs(0.5 * (e.ticks_left[sel] / r.ticks_per_meter_left
+                                           + e.ticks_right[sel] / r.ticks_per_meter_right))))
+    ws = log.wheel_speeds
+    if ws is None or len(ws.t) < 2:
+        return 0.0
+    sel = (ws.t >= t0) & (ws.t <= t1)
+    tt, v = ws.t[sel], 0.5 * (ws.v_left[sel] + ws.v_right[sel])
+    return float(np.sum(np.abs(v[:-1]) * np.diff(tt))) if len(tt) > 1 else 0.0
+
+
 def repeat_notes(log: Log) -> list[str]:
     """One line when gps.csv repeats fixes (``repeated_fixes``), [] otherwise."""
     if log.gps is None or len(log.gps.t) < 2:
         return []
     n = int(repeated_fixes(log.gps).sum())
-    if not n:
-        return []
-    return [f"gps: {n} of {len(log.gps.t)} fixes repeat the fix before them exactly (a receiver re-publishing "
-            "its last fix): each position was read once, at its first stamp"]
+    out = [] if not n else [
+        f"gps: {n} of {len(log.gps.t)} fixes repeat the fix before them exactly (a receiver re-publishing its "
+        "last fix): each position was read once, at its first stamp"]
+    g = log.gps
+    for a, b, travel, turn in frozen_fixes(log):
+        out.append(f"gps: the {b - a + 1} fixes from t={g.t[a]:.2f} to {g.t[b]:.2f} s hold one position while "
+                   f"the wheels and the gyro agree the robot drove {travel:.1f} m and turned {turn:.1f} rad: a "
+                   "frozen receiver; all but the first were left out, the wheels carry the path there")
+    return out
 
 
 #: A gyro rail: at least this many samples in a row at the largest |rate| of
@@ -354,18 +459,23 @@ def saturation_notes(log: Log) -> list[str]:
             "on faster turns): they were left out, the wheels carry the heading there"]
 
 
-def clean(log: Log) -> tuple[Log, dict[str, int]]:
+def clean(log: Log, frozen: bool = True) -> tuple[Log, dict[str, int]]:
     """The log as every estimator reads it: GPS fixes that repeat the one
     before dropped (``repeated_fixes``; the first copy is kept, its stamp
-    nearest the fix), gyro samples at the gyro's rail dropped
+    nearest the fix), and those of a frozen receiver (``frozen_fixes``), gyro samples at the gyro's rail dropped
     (``saturated``), GPS stamps moved back by the configured
     ``[gps] time_offset`` (a fix stamped t was taken at t - offset), then
     ``despike``. Returns it with the spikes taken out per sensor (the
     repeated fixes and the rail are not rejections: ``repeat_notes`` and
-    ``saturation_notes`` say them, and pipeline.estimate makes those warnings)."""
+    ``saturation_notes`` say them, and pipeline.estimate makes those warnings).
+    ``frozen``: False leaves a frozen receiver's fixes in (the live
+    estimator's windows: a few seconds of a freeze look like a stall, and a
+    window starting inside one would keep a stale copy as its first fix)."""
     from dataclasses import replace
     if log.gps is not None and len(log.gps.t) > 1:
         rep = repeated_fixes(log.gps)
+        for a, b, _, _ in (frozen_fixes(log) if frozen else []):
+            rep[a + 1:b + 1] = True
         if rep.any():
             g = log.gps
             keep = ~rep

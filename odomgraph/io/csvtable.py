@@ -99,8 +99,9 @@ def read_table(path: Path, required: tuple[str, ...], optional: tuple[str, ...] 
         if wrong.any():
             k = int(np.argmax(wrong)) + 1
             what = "decreases" if equal_times else "does not increase"
-            raise LogFormatError(path, f"time {what} (t = {float(out['t'][k]):.9g} after "
-                                       f"{float(out['t'][k - 1]):.9g})", int(out["_line"][k]))
+            # every digit written (real-clock stamps, 1.7e9 s, print alike at 9 significant digits)
+            a, b = (np.format_float_positional(float(out["t"][i]), trim="-") for i in (k, k - 1))
+            raise LogFormatError(path, f"time {what} (t = {a} after {b})", int(out["_line"][k]))
     return out
 
 
