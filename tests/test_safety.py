@@ -191,6 +191,18 @@ def test_a_file_edited_since_odomgraph_wrote_it_is_the_users(tmp_path, short_log
     assert json.loads((out / "summary.json").read_text())["method"] == "batch"
 
 
+def test_calibrate_refuses_a_users_file_before_any_work(tmp_path, short_log, monkeypatch):
+    """A probe waited 8 s of calibration for the refusal."""
+    import odomgraph.pipeline as P
+    from odomgraph.errors import OutputDirError
+    user = tmp_path / "robot.toml"
+    user.write_text("# hand-tuned\n")
+    monkeypatch.setattr(P, "calibrate", lambda *a, **k: pytest.fail("calibrated before refusing"))
+    with pytest.raises(OutputDirError, match="not written by odomgraph"):
+        P.calibrate_to_file(read_log(short_log), user)
+    assert user.read_text() == "# hand-tuned\n"
+
+
 def test_calibrate_never_overwrites_the_logs_robot_toml_or_a_users_file(tmp_path, short_log):
     log = tmp_path / "log"
     shutil.copytree(short_log, log)
