@@ -1,16 +1,24 @@
-"""Issue 3 scale: wall time, per-update time and peak memory against log length
-(5, 10, 30, 60 minutes; encoders 20 Hz, gyro 20 Hz, GPS 10 Hz), and the
-straightforward GTSAM design (plain CustomFactors in LevenbergMarquardtOptimizer
-and in ISAM2) on the 5-minute log as the peer. Each run is a separate process,
-so peak memory is its own. Writes results/smoother_scaling.{json,md,png}.
+"""Issue 3 and 17 scale: wall time, per-update time and peak memory against log
+length (5, 10, 30, 60, 180 minutes; encoders 20 Hz, gyro 20 Hz, GPS 10 Hz), and
+the straightforward GTSAM design (plain CustomFactors in LevenbergMarquardtOptimizer
+and in ISAM2) on the 5-minute log as the peer. Each log is simulated and written
+once; each run is a separate process that reads it from disk as
+``odomgraph estimate`` does, so its peak memory (VmHWM) is that of a user's run:
+imports, the sensor files and the estimator, not the simulation. A cProfile of
+batch on the one-hour log (top functions by cumulative time) goes into the
+same results. Writes results/smoother_scaling.{json,md,png}.
 
-    python -m benchmarks.smoother_scaling [--minutes 5 10 30 60] [--peer-limit 900]
+    python -m benchmarks.smoother_scaling [--minutes 5 10 30 60 180] [--peer-limit 900]
 """
 from __future__ import annotations
 
 import argparse
 import multiprocessing as mp
+import re
 import resource
+import shutil
+import tempfile
+from pathlib import Path
 
 from benchmarks._common import RESULTS, save
 
@@ -20,16 +28,32 @@ def _scenario(minutes: float):
     return paper(60.0 * minutes).with_(rates=Rates(encoders=20.0, gyro=20.0, gps=10.0))
 
 
+def _write(args):
+    minutes, path = args
+    from odomgraph.io.log import write_log
+    from odomgraph.sim.simulate import simulate
+    write_log(simulate(_scenario(minutes), 0), path)
+
+
+def _iterations(est) -> int | None:
+    """Batch's Gauss-Newton iterations, from its note."""
+    for n in est.notes:
+        m = re.search(r"(\d+) Gauss-Newton iterations", n)
+        if m:
+            return int(m.group(1))
+    return None
+
+
 def _job(args):
-    kind, minutes, q, peer_limit = args
+    kind, minutes, q, peer_limit, path = args
     import time
     from odomgraph.estimators.schedule import Schedule
-    from odomgraph.sim.simulate import simulate
-    log = simulate(_scenario(minutes), 0)
     sch = Schedule(20.0)
     out = {"kind": kind, "minutes": minutes}
-    t0 = time.perf_counter()
     if kind.startswith("peer"):
+        from odomgraph.sim.simulate import simulate
+        log = simulate(_scenario(minutes), 0)
+        t0 = time.perf_counter()
         from odomgraph.estimators.batch import SmootherOptions
         from benchmarks.peers import straightforward_isam2, straightforward_lm
         if kind == "peer-lm":
@@ -42,10 +66,41 @@ def _job(args):
             out.update(wall_s=secs, completed=done, updates=n, first_ms=1e3 * times[:k].mean(),
                        last_ms=1e3 * times[-k:].mean())
     else:
+        from odomgraph.io.log import read_log
         from odomgraph.pipeline import Method, estimate
+        t0 = time.perf_counter()
+        log = read_log(path)
+        t_read = time.perf_counter() - t0
+        if kind == "profile-batch":
+            import cProfile
+            import pstats
+            pr = cProfile.Profile()
+            pr.enable()
+            estimate(log, Method.batch, sch)
+            pr.disable()
+            st = pstats.Stats(pr).stats
+            total = max(v[3] for v in st.values())
+            # Our own functions only (the builtins' cumulative times are their own), the wrappers that only
+            # pass the call on left out by keeping one row per distinct cumulative time.
+            rows, seen = [], set()
+            for k, v in sorted(st.items(), key=lambda kv: -kv[1][3]):
+                name = f"{Path(k[0]).parent.name}/{Path(k[0]).name}:{k[1]}({k[2]})"
+                if "odomgraph" not in k[0] or round(v[3], 2) in seen:
+                    continue
+                seen.add(round(v[3], 2))
+                rows.append({"function": name, "calls": int(v[0]), "cum_s": v[3], "share": v[3] / total})
+                if len(rows) == 16:
+                    break
+            gt = [(v[2], v[0]) for k, v in st.items() if k[2] == "<built-in method gtsam.gtsam.optimize>"]
+            out.update(total_s=total, top=rows, gtsam_optimize_s=gt[0][0] if gt else 0.0)
+            q.put(out)
+            return
         est = estimate(log, Method(kind), sch)
         out["wall_s"] = time.perf_counter() - t0
+        out["read_s"] = t_read
         out["rows"] = len(est.t)
+        if kind == "batch":
+            out["iterations"] = _iterations(est)
         if est.update_times is not None:
             ut = est.update_times
             k = max(1, len(ut) // 10)
@@ -55,10 +110,10 @@ def _job(args):
     q.put(out)
 
 
-def run(kind, minutes, peer_limit=900.0):
+def run(kind, minutes, peer_limit=900.0, path=None):
     ctx = mp.get_context("spawn")
     q = ctx.Queue()
-    p = ctx.Process(target=_job, args=((kind, minutes, q, peer_limit),))
+    p = ctx.Process(target=_job, args=((kind, minutes, q, peer_limit, path),))
     p.start()
     res = q.get()
     p.join()
@@ -68,13 +123,27 @@ def run(kind, minutes, peer_limit=900.0):
 
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__)
-    ap.add_argument("--minutes", type=float, nargs="+", default=[5, 10, 30, 60])
+    ap.add_argument("--minutes", type=float, nargs="+", default=[5, 10, 30, 60, 180])
     ap.add_argument("--peer-limit", type=float, default=900.0, help="stop the peer ISAM2 after this many s")
+    ap.add_argument("--profile-minutes", type=float, default=60.0, help="log length of the batch profile")
     args = ap.parse_args(argv)
     results = []
-    for m in args.minutes:
-        for kind in ("ekf", "batch", "isam2", "fixed-lag"):
-            results.append(run(kind, m))
+    tmp = Path(tempfile.mkdtemp(prefix="odomgraph-scaling-"))
+    profile = None
+    try:
+        ctx = mp.get_context("spawn")
+        for m in sorted(set(args.minutes) | {args.profile_minutes}):
+            path = tmp / f"log{m:g}"
+            with ctx.Pool(1) as pool:           # the simulation's memory stays out of this process
+                pool.map(_write, [(m, str(path))])
+            if m in args.minutes:
+                for kind in ("ekf", "batch", "isam2", "fixed-lag"):
+                    results.append(run(kind, m, path=str(path)))
+            if m == args.profile_minutes:
+                profile = run("profile-batch", m, path=str(path))
+            shutil.rmtree(path)
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
     peer_min = min(args.minutes)
     results.append(run("peer-lm", peer_min))
     results.append(run("peer-isam2", peer_min, args.peer_limit))
@@ -92,7 +161,7 @@ def main(argv=None):
               f"{ours_b['wall_s']:.1f} s (**{pl['wall_s'] / ours_b['wall_s']:.1f}×** faster); straightforward ISAM2 "
               f"{pi['wall_s']:.1f} s{'' if pi['completed'] else ' (stopped at the limit, unfinished)'} vs isam2 "
               f"{ours_i['wall_s']:.1f} s (**{pi['wall_s'] / ours_i['wall_s']:.1f}×**)."]
-    save("smoother_scaling", {"runs": results}, "\n".join(lines))
+    save("smoother_scaling", {"runs": results, "profile": profile}, "\n".join(lines))
 
 
 def _plot(results):

@@ -76,7 +76,17 @@ def test_a_freeze_on_a_steady_arc_is_found_and_look_alikes_are_not():
     base = yard(80.0)
     arc = base.with_(prologue=(Segment(2.0, 0.0, 0.0),), loop=(Segment(30.0, 0.8, 0.25),), slips=())
     log = _frozen(inject(arc, Faults(), 97), 40.0, 55.0)
-    assert len(frozen_fixes(log)) == 1
+    (first, last, travel, turn), = frozen_fixes(log)
+    g = log.gps
+    # the run: the last fresh fix before 40 s, then its copies up to 55 s
+    assert (first, last) == (np.searchsorted(g.t, 40.0) - 1, np.searchsorted(g.t, 55.0) - 1)
+    span = g.t[last] - g.t[first]
+    assert travel == pytest.approx(0.8 * span, rel=0.05)     # 0.8 m/s for the run's span
+    # 0.25 rad/s commanded: on a circle the gyro's bias, taken against the
+    # wheels' rate over the whole log, also takes in the wheels' track error
+    # (this robot's wheels read the turn 1.5x the gyro), so the turn counted
+    # is nearer the wheels' (5.1 rad here; the gyro's own reading 3.4 rad)
+    assert 0.25 * span < turn < 1.5 * 0.25 * span
     pivot = base.with_(robot=base.robot.with_(gps_lever_arm=(0.0, 0.0)))
     log = inject(pivot, Faults(motion="rotate"), 98)
     g = log.gps

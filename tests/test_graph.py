@@ -96,3 +96,28 @@ def test_robust_measurement_rows_have_the_gradient_of_their_loss(kind):
             num = (linearize(prob, *B.retract(pose, W, d)).cost - linearize(prob, *B.retract(pose, W, -d)).cost) / 2e-7
             grad = -(A1[k][:, j] @ b[k]) - (A2[k - 1][:, j] @ b[k - 1])
             assert grad == pytest.approx(num, rel=1e-4, abs=1e-5)
+
+
+def test_graph_built_in_chunks_equals_the_whole_stack(monkeypatch):
+    """gaussian_graph stacks GRAPH_CHUNK intervals at a time (memory): the
+    step it solves is the one from the whole stack, exactly, also with a chunk
+    that does not divide the intervals and with range biases (a second key)."""
+    sc = paper(30).with_(rates=Rates(gps=0, ranges=5))
+    sc = sc.with_(robot=sc.robot.with_(beacons=beacons_around(0, 15, -5, 5)))
+    log = simulate(sc, 4)
+    prob = B.build_problem(log, Schedule(10.0), B.SmootherOptions(range_bias=True))
+    from odomgraph.estimators.ekf import run_ekf
+    pose, W = B.initial_guess(prob, run_ekf(log, Schedule(10.0)))
+    lin = linearize(prob, pose, W, range_bias=np.zeros(prob.n_bias) if prob.n_bias else None)
+    order = B.time_ordering(prob.kf.n, 1 if prob.n_bias else 0)
+    whole = B.gaussian_graph(prob, lin)
+    step = whole.optimize(order, B.gtsam.EliminateQR)
+    monkeypatch.setattr(B, "GRAPH_CHUNK", 7)
+    chunked = B.gaussian_graph(prob, lin)
+    assert prob.n_bias and chunked.size() == whole.size() and (prob.kf.n - 1) % 7 != 0
+    step7 = chunked.optimize(order, B.gtsam.EliminateQR)
+    for k in range(prob.kf.n + (1 if prob.n_bias else 0)):
+        assert np.array_equal(step.at(k), step7.at(k))
+    A1, A2, b = B.factor_arrays(prob, lin)
+    a1, a2, bb = B.factor_arrays(prob, lin, slice(10, 17))
+    assert np.array_equal(A1[10:17], a1) and np.array_equal(A2[10:17], a2) and np.array_equal(b[10:17], bb)

@@ -72,6 +72,10 @@ class _Path:
 
     def __init__(self, log, scales):
         self.t, self.pose = wheel_poses(log, scales)
+        # Each column contiguous once: np.interp copies a strided column on
+        # every call, which made the windows' many small calls O(log length)
+        # each (the check took 12 s of a one-hour batch run).
+        self._x, self._y, self._th = (np.ascontiguousarray(self.pose[:, i]) for i in range(3))
         self.lever = np.array(log.robot.gps_lever_arm, float)
         # The derivative is taken over a span of several wheel intervals: the
         # interpolated path has a kink at each node (a 0.02 s step saw them
@@ -79,14 +83,14 @@ class _Path:
         self.h = max(0.1, 2.0 * float(np.median(np.diff(self.t)))) if len(self.t) > 1 else 0.1
 
     def heading(self, t):
-        return np.interp(t, self.t, self.pose[:, 2])
+        return np.interp(t, self.t, self._th)
 
     def antenna(self, t, dl=(0.0, 0.0)):
         lx, ly = self.lever + np.asarray(dl, float)
         th = self.heading(t)
         c, s = np.cos(th), np.sin(th)
-        return np.stack([np.interp(t, self.t, self.pose[:, 0]) + c * lx - s * ly,
-                         np.interp(t, self.t, self.pose[:, 1]) + s * lx + c * ly], -1)
+        return np.stack([np.interp(t, self.t, self._x) + c * lx - s * ly,
+                         np.interp(t, self.t, self._y) + s * lx + c * ly], -1)
 
     def velocity(self, t, dl=(0.0, 0.0)):
         return (self.antenna(t + self.h, dl) - self.antenna(t - self.h, dl)) / (2.0 * self.h)

@@ -281,8 +281,9 @@ def repeated_fixes(gps) -> np.ndarray:
 #: A run of fixes at one exact position is judged frozen when it lasts at
 #: least this long [s] ...
 FROZEN_MIN_S = 5.0
-#: ... while the gyro turns through at least this much [rad] (its median
-#: over the run taken out: a bias is no turn) ...
+#: ... while the gyro turns through at least this much [rad] (after its
+#: bias, taken against the wheels' rate over the whole log: a bias is no
+#: turn) ...
 FROZEN_TURN = 0.5
 #: ... the wheels' turn rate follows the gyro's (their 0.5 s means correlate
 #: by this much, or differ by less than FROZEN_DISAGREE of the turn, summed:
@@ -338,7 +339,7 @@ def frozen_fixes(log: Log) -> list[tuple[int, int, float, float]]:
         if sel.sum() < 10:
             continue
         tg = gy.t[sel]
-        ww = wheel_yaw_rate(log, tg)
+        ww = ww_all[sel]
         wg = gy.omega[sel] - bias
         turn = float(np.sum(np.abs(wg[:-1]) * np.diff(tg)))
         bins = np.floor((tg - tg[0]) / 0.5).astype(int)
