@@ -186,3 +186,39 @@ def test_a_stream_finds_a_short_pause_as_the_whole_log_does():
     b = live.run()
     np.testing.assert_array_equal(a.mean, b.mean)
     assert [n for n in b.notes if "pauses" in n] == [n for n in a.notes if "pauses" in n] != []
+
+
+@pytest.mark.parametrize("name,seed,a,b", [("paper", 7, 40.0, 58.0), ("yard", 8, 30.0, 55.0)])
+def test_batch_rows_inside_a_silence_carry_the_unknown_path(name, seed, a, b):
+    """No sensor while the robot drove on: batch draws its rows there between
+    the states either side (one long keyframe interval), which say nothing of
+    the path's shape. Before: a probe's 30 s silence, a row 4.1 m and 1.7 rad
+    off at sigma 1-3 cm, status ok. Now each row inside, and each row resampled
+    at 5 Hz, is inside 3 sigma, the silence is named with the wheels' travel,
+    and the rows outside it are those of the same run without the widening."""
+    from odomgraph.analysis.resample import regular_times, resampled
+    from odomgraph.estimators import gaps
+    log = _log(name, seed, Rates(encoders=50.0, gyro=50.0, gps=10.0), 90.0)
+    cut = silent(log, a, b)
+    est = estimate(cut, "batch")
+    (pa, pb, dist), = est.pauses
+    assert pa == pytest.approx(a, abs=0.05) and pb == pytest.approx(b, abs=0.05)
+    # the wheels' travel over the silence (nominal parameters), to the scale factors' few per cent
+    e, r = cut.encoders, cut.robot
+    row = int(np.argmax(e.t >= b))
+    wheels = abs(0.5 * (e.ticks_left[row] / r.ticks_per_meter_left + e.ticks_right[row] / r.ticks_per_meter_right))
+    assert dist == pytest.approx(wheels, rel=0.01) and dist > 5.0
+    assert any(f"t={pa:.1f}-{pb:.1f} s" in n and f"{dist:.2f} m" in n for n in est.notes), est.notes
+    for rows in (est, resampled(est, regular_times(est, 5.0))):
+        inside = (rows.t > a) & (rows.t < b)
+        assert inside.sum() >= (1 if rows is est else 5 * (b - a) - 2)
+        ex = rows.mean[inside, 0] - cut.truth.at("x", rows.t[inside])
+        ey = rows.mean[inside, 1] - cut.truth.at("y", rows.t[inside])
+        assert np.all(np.abs(ex) < 3 * rows.sigma[inside, 0]) and np.all(np.abs(ey) < 3 * rows.sigma[inside, 1])
+        # mid-silence the heading is as unknown as a start's without one
+        mid = inside & (np.abs(rows.t - 0.5 * (a + b)) < 0.25 * (b - a))
+        assert np.all(rows.sigma[mid, 2] > 1.5), rows.sigma[mid, 2]
+    # outside the silence nothing changed: the widening is the rows' own variance plus the bridge's
+    pos, th = gaps.pause_variance(est.t, est.pauses)
+    assert np.all(pos[(est.t <= a) | (est.t >= b)] == 0.0)
+    assert np.all(th[(est.t <= a) | (est.t >= b)] == 0.0)

@@ -74,6 +74,18 @@ def resampled(est: Estimate, times: np.ndarray) -> Estimate:
     cov = None
     if est.pose_cov is not None:
         cov = (1 - w)[:, None, None] * est.pose_cov[k] + w[:, None, None] * est.pose_cov[k1]
+    if est.pauses:
+        # Inside a silence of every sensor the arc between two rows is a
+        # guess: at least the unknown path's variance there (est.pauses), not
+        # the rows' interpolated (a row mid-silence and one at its edge would
+        # give a straight line from the bridge's middle to nothing).
+        from odomgraph.estimators.gaps import pause_variance
+        pos, th = pause_variance(times, est.pauses)
+        for col, add in ((S.X, pos), (S.Y, pos), (S.THETA, th)):
+            sigma[:, col] = np.maximum(sigma[:, col], np.sqrt(add))
+        if cov is not None:
+            for i, add in ((0, pos), (1, pos), (2, th)):
+                cov[:, i, i] = np.maximum(cov[:, i, i], add)
     return replace(est, t=times, mean=lin, sigma=sigma, pose_cov=cov, innovations={}, online=None,
                    update_times=None)
 

@@ -225,3 +225,72 @@ def unwidened_gap_warnings(name: str, t: np.ndarray, mean: np.ndarray, sigma: np
     return [f"{name}: the wheels slipped inside gaps in the fixes ({parts}); when inside each gap is not known, and "
             "its rows there (out before the gap ended, or smoothed over only part of it) do not carry that in "
             "their sigma; not trustworthy there (--method batch widens them)"]
+
+
+# --- A silence of every sensor: the path inside it is not known ---------------------------------
+
+def pause_paths(meas, t: np.ndarray, mean: np.ndarray) -> list[tuple[float, float, float]]:
+    """(start, end [s], distance [m]) of each silence of every sensor longer
+    than PAUSE_S (measurements.pause_spans) that the rows t (N,), mean (N, 11)
+    cross. The distance is the robot's travel across it as far as the log
+    says: the wheels' (the encoder row that spans it: its ticks, nominal
+    parameters), or the straight line between the rows either side when
+    longer (a robot moved with its wheels silent, or a wheel_speeds.csv log,
+    whose speeds say nothing of the silence)."""
+    from odomgraph.estimators.measurements import pause_spans
+    out = []
+    w = meas.wheel
+    for a, b in pause_spans(meas):
+        if not (t[0] < b and t[-1] > a):
+            continue
+        wheels = 0.0
+        if w.dt is not None:
+            lo, hi = np.maximum(w.t - 0.5 * w.dt, a), np.minimum(w.t + 0.5 * w.dt, b)
+            over = np.maximum(hi - lo, 0.0)
+            wheels = float(np.sum(np.abs(w.m.mean(1)) * over))
+        i, j = int(np.searchsorted(t, a, side="right")) - 1, int(np.searchsorted(t, b, side="left"))
+        chord = float(np.hypot(*(mean[min(j, len(t) - 1), 0:2] - mean[max(i, 0), 0:2])))
+        out.append((float(a), float(b), max(wheels, chord)))
+    return out
+
+
+def pause_variance(t: np.ndarray, pauses) -> tuple[np.ndarray, np.ndarray]:
+    """(x and y variance [m^2], heading variance [rad^2]) (N,) that the
+    unknown path through each of ``pauses`` (pause_paths) adds at the times
+    t (N,): a bridge pinned at the rows either side, D^2 f (1 - f) in x and
+    in y (D/2 mid-silence), D the distance, f the fraction of the silence
+    gone; and, where the robot moved at all (MIN_DISTANCE), a heading as
+    unknown as a start's with no heading (pi, estimators.heading) mid-silence.
+    The gyro was silent too: no turn inside is known, only the net one."""
+    pos, th = np.zeros(len(t)), np.zeros(len(t))
+    for a, b, dist in pauses:
+        sel = (t > a) & (t < b)
+        f = (t[sel] - a) / (b - a)
+        pos[sel] += dist ** 2 * f * (1.0 - f)
+        if dist >= MIN_DISTANCE:
+            th[sel] += np.pi ** 2 * 4.0 * f * (1.0 - f)
+    return pos, th
+
+
+def widen_pauses(t: np.ndarray, sigma: np.ndarray, pose_cov: np.ndarray | None, pauses) -> int:
+    """Rows t (N,), sigma (N, 11), pose_cov (N, 3, 3) or None widened in place
+    by pause_variance. Returns the number of rows widened."""
+    pos, th = pause_variance(t, pauses)
+    sel = (pos > 0) | (th > 0)
+    sigma[sel, S.X] = np.sqrt(sigma[sel, S.X] ** 2 + pos[sel])
+    sigma[sel, S.Y] = np.sqrt(sigma[sel, S.Y] ** 2 + pos[sel])
+    sigma[sel, S.THETA] = np.sqrt(sigma[sel, S.THETA] ** 2 + th[sel])
+    if pose_cov is not None:
+        pose_cov[sel, 0, 0] += pos[sel]
+        pose_cov[sel, 1, 1] += pos[sel]
+        pose_cov[sel, 2, 2] += th[sel]
+    return int(sel.sum())
+
+
+def pause_note(method: str, pauses) -> list[str]:
+    """The line naming each silence whose rows were widened, or []."""
+    if not pauses:
+        return []
+    parts = ", ".join(f"t={a:.1f}-{b:.1f} s ({b - a:.4g} s, {d:.2f} m)" for a, b, d in pauses)
+    return [f"{method}: no sensor spoke during {parts}: the rows inside are drawn between the states either side, "
+            "and carry the unknown path's shape in their sigma (up to half the distance, and the heading)"]
