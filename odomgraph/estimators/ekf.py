@@ -34,7 +34,8 @@ from odomgraph.checks import bounded, check_fields
 from odomgraph.errors import EstimatorDivergedError
 from odomgraph.estimators.heading import HeadingWatch, circle_variance
 from odomgraph.estimators.initial import InitialState, initial_state
-from odomgraph.estimators.measurements import PAUSE_S, from_log, pause_spans, slip_intensity
+from odomgraph.estimators.measurements import (PAUSE_PATH_SHARE, PAUSE_S, PAUSE_TURN_SHARE, from_log, pause_spans,
+                                                slip_intensity)
 from odomgraph.observability import decondition, pinned_basis
 from odomgraph.estimators.slipcheck import in_stretches, in_window
 from odomgraph.result import Estimate, Innovations
@@ -52,12 +53,6 @@ _I = np.eye(S.N)
 JUMP_SPEED = 3.0
 JUMP_HOLD = 30.0
 
-#: Across a pause the wheels' net travel D (the encoder row that spans it)
-#: carries the pose, but the path's shape is unknown: each position axis gets
-#: this share of D as sigma, the heading this share of the turn (plus a
-#: scale factor's worth of both).
-PAUSE_PATH_SHARE = 0.25
-PAUSE_TURN_SHARE = 0.05
 
 
 def common_scale_direction(x: np.ndarray) -> np.ndarray:

@@ -32,7 +32,7 @@ from odomgraph import state as S
 from odomgraph.factors import encoder, gps as gps_model, gyro, pose2, ranging
 from odomgraph.factors.motion import arc_at, transition_residual
 from odomgraph.estimators.initial import InitialState
-from odomgraph.estimators.measurements import Measurements
+from odomgraph.estimators.measurements import PAUSE_PATH_SHARE, PAUSE_S, PAUSE_TURN_SHARE, Measurements
 from odomgraph.estimators.keyframes import Keyframes
 from odomgraph.io.robot import RobotConfig
 
@@ -131,7 +131,7 @@ class Problem:
         dt = kf.dt
         # the last interval has no next one and counts its own dt twice
         self.rw = RandomWalkSteps.of(self.robot.process, self.q_slip, walk_span(dt, np.append(dt[1:], dt[-1])))
-        self.motion_whiten = 1.0 / motion_sigma(kf, self.robot.process.yaw_accel**2)
+        self.motion_whiten = 1.0 / motion_sigma(kf, self.robot.process.yaw_accel**2, self.robot.track_width)
 
 
 def walk_span(dt: np.ndarray, dt_next: np.ndarray) -> np.ndarray:
@@ -481,7 +481,7 @@ def linearize(prob: Problem, pose: np.ndarray, W: np.ndarray, k0: int = 0, k1: i
                          A_bp, b_bp)
 
 
-def motion_sigma(kf: Keyframes, q_w: float) -> np.ndarray:
+def motion_sigma(kf: Keyframes, q_w: float, track_width: float) -> np.ndarray:
     """(N-1, 3) 1-sigma of the motion residual (along-track, lateral [m], heading [rad]).
 
     With W_k the exact interval average, the arc is exact for a constant
@@ -498,6 +498,20 @@ def motion_sigma(kf: Keyframes, q_w: float) -> np.ndarray:
     out[:, 0] = 1e-3
     out[:, 1] = np.sqrt(1e-6 + lat**2)
     out[:, 2] = 1e-4
+    # An interval across a silence of every sensor (keyframes.py gives it
+    # one interval): the wheels' ticks say how far and how much it turned
+    # net, not along what path, so the arc is as loose as the EKF makes it
+    # (measurements.PAUSE_PATH_SHARE, PAUSE_TURN_SHARE): a share of the distance
+    # along and across, a share of the turn in heading. Tight, it held the
+    # incremental smoothers' pose metres from the fixes after a probe's
+    # 30 s silence (400 fixes gated, z 25-130).
+    pause = dt > PAUSE_S
+    if pause.any():
+        dist = speed[pause] * dt[pause]
+        turn = np.abs(kf.enc_m[pause, 1] - kf.enc_m[pause, 0]) / track_width * dt[pause]
+        out[pause, 0] = np.maximum(out[pause, 0], PAUSE_PATH_SHARE * dist)
+        out[pause, 1] = np.maximum(out[pause, 1], PAUSE_PATH_SHARE * dist)
+        out[pause, 2] = np.maximum(out[pause, 2], PAUSE_TURN_SHARE * turn)
     return out
 
 

@@ -128,7 +128,7 @@ class GrowingProblem:
         p = self.problems[0]
         t = b.view("t")
         b.append("zero_slip", zero_slip_intervals(t[j:j + 2], p.init, log_t_start, self.schedule))
-        b.append("motion_whiten", 1.0 / motion_sigma(piece, p.robot.process.yaw_accel**2)[w:w + 1])
+        b.append("motion_whiten", 1.0 / motion_sigma(piece, p.robot.process.yaw_accel**2, p.robot.track_width)[w:w + 1])
         b.append("walk_span", np.zeros(1))
         b.append("no_slip", np.zeros(1, bool))
         self._publish(g.size, r.size)

@@ -54,6 +54,13 @@ class Measurements:
 #: (a robot parked while its logger stopped, two sessions in one file), not
 #: a stretch to coast through (estimators.ekf: EKF._pause).
 PAUSE_S = 10.0
+#: Across a pause the wheels' net travel D (the encoder row that spans it)
+#: carries the pose, but the path's shape is unknown: each position axis gets
+#: this share of D as sigma, the heading this share of the turn (the EKF adds
+#: a scale factor's worth of both; the smoothers' motion row across it,
+#: graph.motion_sigma).
+PAUSE_PATH_SHARE = 0.25
+PAUSE_TURN_SHARE = 0.05
 
 
 def pause_spans(meas: Measurements) -> list[tuple[float, float]]:
