@@ -90,11 +90,14 @@ def _with_sideways(est: Estimate, log: Log, schedule: Schedule, run, method: Met
         # - a clock offset or a second look at the window: a run would not repeat them.
         return flagged()
 
+    from odomgraph.analysis.metrics import gps_times
+    tg = gps_times(log)              # the rows' clock (a configured [gps] time_offset applied)
+
     def within(spans) -> np.ndarray:
         """(M,) mask of the fixes inside any of the (start, end) spans [s]."""
         out = np.zeros(len(g.t), bool)
         for a, b in spans:
-            out |= (g.t >= a) & (g.t <= b)
+            out |= (tg >= a) & (tg <= b)
         return out
     pad = sideways.HELD_PAD
     held = within([(a - pad, b + pad) for a, b, _, _ in found])
@@ -127,7 +130,7 @@ def _with_sideways(est: Estimate, log: Log, schedule: Schedule, run, method: Met
         if alt is None:
             return flagged()
         scale = alt.noise_scales.get("gps", {}).get("applied", 1.0)
-        spans = [(float(g.t[i]), float(g.t[j])) for i, j in runs_of(held)]
+        spans = [(float(tg[i]), float(tg[j])) for i, j in runs_of(held)]
         biased = [(max(a, c), min(b, d)) for a, b in spans
                   for c, d in windowfit.stretches(alt, log, a, b + 1e-9, scale, rows=False)]
         if not biased:
@@ -153,12 +156,12 @@ def _with_sideways(est: Estimate, log: Log, schedule: Schedule, run, method: Met
     # counted as the estimators count: a repeated copy of a fix is no fix
     # (measurements.clean), and fixes outside the rows' span were never offered
     from odomgraph.estimators.measurements import repeated_fixes
-    drop = drop & ~repeated_fixes(g) & (g.t >= est.t[0]) & (g.t <= est.t[-1])
+    drop = drop & ~repeated_fixes(g) & (tg >= est.t[0]) & (tg <= est.t[-1])
     n = int(drop.sum())
     line = sideways.recovered(found, biased, n)
     alt.rejected["gps"] = alt.rejected.get("gps", 0) + n
     alt.used["gps"] = alt.used.get("gps", 0) + n
-    alt.held_out["gps"] = np.sort(np.concatenate([alt.held_out.get("gps", np.zeros(0)), g.t[drop]]))
+    alt.held_out["gps"] = np.sort(np.concatenate([alt.held_out.get("gps", np.zeros(0)), tg[drop]]))
     # Still flagged: nothing outside the fixes can tell which side of the
     # stretch the good fixes are on. A bias that outlasts what was held out
     # leaves the rows after it following it (a probe's 30 s bias: batch
@@ -281,8 +284,13 @@ def _estimate_checked(log: Log, method: Method, schedule: Schedule, progress, op
             schedule = replace(schedule, calibrate_until=free)
             est, options = run(schedule, options)
     except EstimatorDivergedError as exc:
-        # A mounting mistake is the likeliest cause, and the data can name it.
+        # A mounting mistake is the likeliest cause, and the data can name it;
+        # so can a GPS clock off against the wheels (a probe's 2 s late fixes:
+        # the EKF stopped where batch ran and named the offset).
         found = mounting_warnings(log)
+        if not found and log.gps is not None and not log.robot.gps_time_offset:
+            from odomgraph.analysis.timing import gps_offset_warnings
+            found = gps_offset_warnings(log, _Nominal())
         if found:
             raise EstimatorDivergedError(f"{exc}; the log shows why: {'; '.join(found)}") from exc
         raise
@@ -311,6 +319,12 @@ def _estimate_checked(log: Log, method: Method, schedule: Schedule, progress, op
     est.flags += suspect
     _note_motion_scales(est, log, motion)
     return est
+
+
+class _Nominal:
+    """What the timing check reads of an estimate (its final scale factors)
+    when there is none: the nominal ones."""
+    mean = np.ones((1, S.N))
 
 
 def _gap_warnings(est: Estimate, log: Log, options: dict) -> list[str]:

@@ -121,16 +121,27 @@ def gps_deviation(est: Estimate, log: Log) -> tuple[np.ndarray, np.ndarray] | No
     return t, np.hypot(r[:, 0], r[:, 1])
 
 
+def gps_times(log: Log) -> np.ndarray:
+    """(G,) the fixes' times [s] on the wheels' clock: gps.csv's stamps less
+    robot.toml's [gps] time_offset, as the estimators read them
+    (measurements.clean). Every comparison of fixes with an estimate's rows
+    goes by these (with the raw stamps a configured or estimated 2 s offset
+    read as a slip in the calibration window: a probe's EKF, status degraded)."""
+    return log.gps.t - log.robot.gps_time_offset if log.robot.gps_time_offset else log.gps.t
+
+
 def gps_residuals(est: Estimate, log: Log) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
     """Measured minus predicted antenna position (pose + lever arm, paper eq.
-    8) for the fixes inside the estimate's span: (t (M,) [s], residual (M, 2)
-    east/north [m], each fix's sigma (M,) [m]); None when the log has no GPS."""
+    8) for the fixes inside the estimate's span: (t (M,) [s] (gps_times),
+    residual (M, 2) east/north [m], each fix's sigma (M,) [m]); None when
+    the log has no GPS."""
     from odomgraph.factors.gps import antenna_position
     g = log.gps
     if g is None or len(g.t) == 0:
         return None
-    inside = (g.t >= est.t[0]) & (g.t <= est.t[-1])
-    t = g.t[inside]
+    tg = gps_times(log)
+    inside = (tg >= est.t[0]) & (tg <= est.t[-1])
+    t = tg[inside]
     p = pose_at(est, t)
     h, _ = antenna_position(p[:, 0], p[:, 1], p[:, 2], log.robot.gps_lever_arm)
     sig = g.sigma[inside] if g.sigma is not None else np.full(t.size, log.robot.gps_sigma)

@@ -44,7 +44,7 @@ def stretches(est, log, t_start: float, t_switch: float | None, gps_scale: float
     ``rows`` the distance is measured in the fixes' sigma alone: whether the
     fixes sit off the estimate's path by more than their noise, where the
     rows' own sigma is a dead reckoning's (analysis.sideways)."""
-    from odomgraph.analysis.metrics import gps_residuals
+    from odomgraph.analysis.metrics import gps_residuals, gps_times
     if t_switch is None or log.gps is None or len(est.t) < 2:
         return []
     res = gps_residuals(est, log)
@@ -57,7 +57,8 @@ def stretches(est, log, t_start: float, t_switch: float | None, gps_scale: float
     t, r, sig = t[inside], r[inside], sig[inside] * gps_scale
     # A fix sent again unchanged (a receiver's stale copies) is one fix, as
     # the estimators read it (measurements): copies would make one fix a median.
-    xy = np.stack([log.gps.x, log.gps.y], -1)[(log.gps.t >= est.t[0]) & (log.gps.t <= est.t[-1])][inside]
+    tg = gps_times(log)
+    xy = np.stack([log.gps.x, log.gps.y], -1)[(tg >= est.t[0]) & (tg <= est.t[-1])][inside]
     fresh = np.concatenate([[True], np.any(np.diff(xy, axis=0) != 0.0, axis=1)])
     t, r, sig = t[fresh], r[fresh], sig[fresh]
     row = np.hypot(np.interp(t, est.t, est.sigma[:, 0]), np.interp(t, est.t, est.sigma[:, 1])) if rows else 0.0

@@ -496,7 +496,10 @@ def clean(log: Log, frozen: bool = True) -> tuple[Log, dict[str, int]]:
             log = log.with_(gyro=replace(g, t=g.t[~sat], omega=g.omega[~sat]))
     off = log.robot.gps_time_offset
     if off and log.gps is not None:
-        log = log.with_(gps=replace(log.gps, t=log.gps.t - off))
+        # The stamps corrected, the offset is spent: a log cleaned again, or
+        # a check that corrects the stamps itself (metrics.gps_times), must
+        # not apply it twice.
+        log = log.with_(gps=replace(log.gps, t=log.gps.t - off), robot=log.robot.with_(gps_time_offset=0.0))
     return despike(log)
 
 
