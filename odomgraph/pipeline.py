@@ -449,7 +449,9 @@ def _window_warnings(est: Estimate, log: Log, schedule: Schedule) -> list[str]:
     # Without any absolute sensor the window calibrates the ratio and the
     # track against the gyro (the common scale is reported undetermined).
     sensors, what = (absolute, "absolute measurements") if absolute else ([log.gyro], "gyro samples")
-    n = sum(int(np.sum((s.t >= est.t[0]) & (s.t < t_end))) for s in sensors if s is not None)
+    from odomgraph.analysis.metrics import gps_times
+    n = sum(int(np.sum(((gps_times(log) if s is log.gps else s.t) >= est.t[0])
+                       & ((gps_times(log) if s is log.gps else s.t) < t_end))) for s in sensors if s is not None)
     if n < MIN_WINDOW_FIXES:
         return [f"the calibration window (t={est.t[0]:.1f}-{t_end:.1f} s) holds only {n} {what}: "
                 "too few to calibrate the scale factors in it; lengthen --calibrate-until"]

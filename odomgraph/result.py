@@ -73,12 +73,12 @@ class Estimate:
     status is "degraded" while any is there."""
     notes: list[str] = field(default_factory=list)
     online: "Estimate | None" = None
-    pauses: list[tuple[float, float, float]] = field(default_factory=list)
-    """(start, end [s], distance [m]) of each silence of every sensor whose rows
+    """For incremental smoothers: the causal estimate as it stood at each time."""
+    pauses: list[tuple[float, float, float, float]] = field(default_factory=list)
+    """(start, end [s], distance [m], turn [rad]) of each silence of every sensor whose rows
     a smoother drew between the states either side and widened by the unknown
     path (estimators.gaps.pause_variance; resampled rows inside are widened
     alike)."""
-    """For incremental smoothers: the causal estimate as it stood at each time."""
     update_times: np.ndarray | None = None
     """Wall time of each incremental update [s] (incremental smoothers)."""
     range_bias: dict[str, dict[str, float]] | None = None

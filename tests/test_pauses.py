@@ -195,13 +195,13 @@ def test_batch_rows_inside_a_silence_carry_the_unknown_path(name, seed, a, b):
     the path's shape. Before: a probe's 30 s silence, a row 4.1 m and 1.7 rad
     off at sigma 1-3 cm, status ok. Now each row inside, and each row resampled
     at 5 Hz, is inside 3 sigma, the silence is named with the wheels' travel,
-    and the rows outside it are those of the same run without the widening."""
+    and nothing is added outside it."""
     from odomgraph.analysis.resample import regular_times, resampled
     from odomgraph.estimators import gaps
     log = _log(name, seed, Rates(encoders=50.0, gyro=50.0, gps=10.0), 90.0)
     cut = silent(log, a, b)
     est = estimate(cut, "batch")
-    (pa, pb, dist), = est.pauses
+    (pa, pb, dist, _), = est.pauses
     assert pa == pytest.approx(a, abs=0.05) and pb == pytest.approx(b, abs=0.05)
     # the wheels' travel over the silence (nominal parameters), to the scale factors' few per cent
     e, r = cut.encoders, cut.robot
@@ -246,3 +246,19 @@ def test_isam2_comes_out_of_a_silence_on_the_fixes(name, seed, a, b):
         assert inside3[after].mean() >= (0.97 if method == "batch" else 0.92), (method, inside3[after].mean())
         assert np.all(inside3[(est.t > a) & (est.t < b)]), method
         assert np.hypot(ex[-1], ey[-1]) < 0.1, method
+
+
+def test_a_parked_robot_keeps_its_heading_through_the_pause():
+    """The logger stopped while the robot stood (paused): the keyframe states
+    either side of the silence are one pose and the wheels turned nothing,
+    so the distance is a few centimetres at most and the heading is not
+    widened (an earlier form measured the distance between the rows either
+    side, 0.2 s of driving away from the silence, and gave a parked robot's
+    mid-pause row a heading sigma of pi)."""
+    log = _log("yard", 14, Rates(encoders=50.0, gyro=50.0, gps=10.0), 90.0)
+    est = estimate(paused(log, 40.0, 600.0), "batch")
+    (a, b, dist, turn), = est.pauses
+    assert b - a == pytest.approx(600.0, abs=1.0)
+    assert dist < 0.1 and turn < 0.1, (dist, turn)
+    mid = (est.t > a) & (est.t < b)
+    assert mid.any() and np.all(est.sigma[mid, 2] < 0.1), est.sigma[mid, 2]

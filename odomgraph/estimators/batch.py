@@ -372,7 +372,7 @@ def solve(prob: Problem, pose: np.ndarray, W: np.ndarray, options: SmootherOptio
         # Only its cost is needed from here on (a rejected step relinearises
         # under GNC, or stops): freeing it before the elimination takes one
         # linearisation (~45 MB on a one-hour log) off the peak.
-        lin = None
+        lin = lin_n = None    # (after an accepted step both names hold it)
         vv = graph.optimize(order, gtsam.EliminateQR)
         del graph
         d = np.stack([vv.at(k) for k in range(n)])
@@ -691,13 +691,14 @@ def smoother_estimate(prob: Problem, schedule: Schedule, pose: np.ndarray, W: np
     # A silence of every sensor: the rows there are drawn between the states
     # either side, which say nothing of the path's shape (a probe's 30 s
     # silence: batch 4.1 m and 1.7 rad off at sigma 1-3 cm mid-silence, status ok).
-    pauses = gaps.pause_paths(prob.meas, rows.t, rows.mean) if prob.meas is not None and len(rows.t) else []
+    pauses = gaps.pause_paths(prob.meas, prob.kf.t, pose, prob.robot.track_width) if prob.meas is not None else []
     if pauses:
-        gaps.widen_pauses(rows.t, rows.sigma, rows.pose_cov, pauses)
+        n = gaps.widen_pauses(rows.t, rows.sigma, rows.pose_cov, pauses)
         if extra.get("online") is not None:
             o = extra["online"]
-            gaps.widen_pauses(o.t, o.sigma, o.pose_cov, pauses)
-        notes = list(notes) + gaps.pause_note(method, pauses)
+            n += gaps.widen_pauses(o.t, o.sigma, o.pose_cov, pauses)
+        if n:
+            notes = list(notes) + gaps.pause_note(method, pauses)
     if causal_lag is None:
         # a whole-log smoother: where in a gap the wheels slipped is not known (estimators.gaps)
         found = gaps.widen_gaps(rows.t, rows.mean, rows.sigma, rows.pose_cov, gaps.fix_times(prob.kf),

@@ -229,45 +229,66 @@ def unwidened_gap_warnings(name: str, t: np.ndarray, mean: np.ndarray, sigma: np
 
 # --- A silence of every sensor: the path inside it is not known ---------------------------------
 
-def pause_paths(meas, t: np.ndarray, mean: np.ndarray) -> list[tuple[float, float, float]]:
-    """(start, end [s], distance [m]) of each silence of every sensor longer
-    than PAUSE_S (measurements.pause_spans) that the rows t (N,), mean (N, 11)
-    cross. The distance is the robot's travel across it as far as the log
-    says: the wheels' (the encoder row that spans it: its ticks, nominal
-    parameters), or the straight line between the rows either side when
-    longer (a robot moved with its wheels silent, or a wheel_speeds.csv log,
-    whose speeds say nothing of the silence)."""
+def pause_paths(meas, kf_t: np.ndarray, kf_pose: np.ndarray, track_width: float
+                ) -> list[tuple[float, float, float, float]]:
+    """(start, end [s], distance [m], turn [rad]) of each silence of every
+    sensor longer than PAUSE_S (measurements.pause_spans) inside the
+    keyframes kf_t (K,), kf_pose (K, 3). The distance is the robot's travel
+    across it as far as the log says: the wheels' (the encoder row that spans
+    it: its ticks, nominal parameters), or the straight line between the
+    keyframe states either side when longer (a robot moved with its wheels
+    silent, or a wheel_speeds.csv log, whose speeds say nothing of the
+    silence); the turn, the wheels' net turn across it (a pivot in place
+    drives no distance and turns)."""
     from odomgraph.estimators.measurements import pause_spans
     out = []
     w = meas.wheel
+
+    def travel(a, b):
+        """(distance [m], net turn [rad]) the wheels report over [a, b] [s]."""
+        if w.dt is None:
+            return 0.0, 0.0
+        lo, hi = np.maximum(w.t - 0.5 * w.dt, a), np.minimum(w.t + 0.5 * w.dt, b)
+        over = np.maximum(hi - lo, 0.0)
+        return (float(np.sum(np.abs(w.m.mean(1)) * over)),
+                float(np.sum(np.abs(w.m[:, 1] - w.m[:, 0]) * over)) / track_width)
     for a, b in pause_spans(meas):
-        if not (t[0] < b and t[-1] > a):
+        if not (kf_t[0] < b and kf_t[-1] > a):
             continue
-        wheels = 0.0
-        if w.dt is not None:
-            lo, hi = np.maximum(w.t - 0.5 * w.dt, a), np.minimum(w.t + 0.5 * w.dt, b)
-            over = np.maximum(hi - lo, 0.0)
-            wheels = float(np.sum(np.abs(w.m.mean(1)) * over))
-        i, j = int(np.searchsorted(t, a, side="right")) - 1, int(np.searchsorted(t, b, side="left"))
-        chord = float(np.hypot(*(mean[min(j, len(t) - 1), 0:2] - mean[max(i, 0), 0:2])))
-        out.append((float(a), float(b), max(wheels, chord)))
+        wheels, turn = travel(a, b)
+        # The keyframes either side (keyframes.py gives the silence one
+        # interval, from the keyframe at or before its start to the one at or
+        # after its end): their straight line, less what the wheels drove
+        # between them outside the silence (at 5 Hz up to 0.2 s of driving,
+        # which a parked robot's silence must not be charged with).
+        i = max(int(np.searchsorted(kf_t, a + 1e-9, side="right")) - 1, 0)
+        j = min(int(np.searchsorted(kf_t, b - 1e-9, side="left")), len(kf_t) - 1)
+        chord = float(np.hypot(*(kf_pose[j, 0:2] - kf_pose[i, 0:2])))
+        outside = travel(kf_t[i], a)[0] + travel(b, kf_t[j])[0]
+        out.append((float(a), float(b), max(wheels, chord - outside), turn))
     return out
+
+
+#: A silence whose wheels turned the robot this much [rad] (or drove it
+#: MIN_DISTANCE) leaves its heading unknown inside.
+MIN_TURN = 0.1
 
 
 def pause_variance(t: np.ndarray, pauses) -> tuple[np.ndarray, np.ndarray]:
     """(x and y variance [m^2], heading variance [rad^2]) (N,) that the
     unknown path through each of ``pauses`` (pause_paths) adds at the times
-    t (N,): a bridge pinned at the rows either side, D^2 f (1 - f) in x and
+    t (N,): a bridge pinned at the silence's ends, D^2 f (1 - f) in x and
     in y (D/2 mid-silence), D the distance, f the fraction of the silence
-    gone; and, where the robot moved at all (MIN_DISTANCE), a heading as
-    unknown as a start's with no heading (pi, estimators.heading) mid-silence.
-    The gyro was silent too: no turn inside is known, only the net one."""
+    gone; and, where the robot moved or turned at all (MIN_DISTANCE,
+    MIN_TURN), a heading as unknown as a start's with no heading (pi,
+    estimators.heading) mid-silence. The gyro was silent too: no turn inside
+    is known, only the net one."""
     pos, th = np.zeros(len(t)), np.zeros(len(t))
-    for a, b, dist in pauses:
+    for a, b, dist, turn in pauses:
         sel = (t > a) & (t < b)
         f = (t[sel] - a) / (b - a)
         pos[sel] += dist ** 2 * f * (1.0 - f)
-        if dist >= MIN_DISTANCE:
+        if dist >= MIN_DISTANCE or turn >= MIN_TURN:
             th[sel] += np.pi ** 2 * 4.0 * f * (1.0 - f)
     return pos, th
 
@@ -291,6 +312,6 @@ def pause_note(method: str, pauses) -> list[str]:
     """The line naming each silence whose rows were widened, or []."""
     if not pauses:
         return []
-    parts = ", ".join(f"t={a:.1f}-{b:.1f} s ({b - a:.4g} s, {d:.2f} m)" for a, b, d in pauses)
+    parts = ", ".join(f"t={a:.1f}-{b:.1f} s ({b - a:.4g} s, {d:.2f} m)" for a, b, d, _ in pauses)
     return [f"{method}: no sensor spoke during {parts}: the rows inside are drawn between the states either side, "
             "and carry the unknown path's shape in their sigma (up to half the distance, and the heading)"]

@@ -490,6 +490,13 @@ def motion_sigma(kf: Keyframes, q_w: float, track_width: float) -> np.ndarray:
     a 1 mm / 0.1 mrad floor for everything second order. |v| comes from the
     measured wheel speeds, not the estimate: a noise model that moved with the
     state would add a term to the cost that Gauss-Newton does not see.
+
+    An interval longer than PAUSE_S (a silence of every sensor, or of the
+    wheels alone, which keyframes.py gives one interval) is as loose as the
+    EKF's pause: PAUSE_PATH_SHARE of the wheels' distance along and across,
+    PAUSE_TURN_SHARE of their net turn (track_width [m]) in heading. A
+    wheel_speeds.csv log has no speed across a silence (keyframes.py: zero),
+    so its interval stays tight (a known gap).
     """
     dt = kf.dt
     speed = np.abs(kf.enc_m.mean(1))

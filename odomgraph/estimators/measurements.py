@@ -472,7 +472,8 @@ def clean(log: Log, frozen: bool = True) -> tuple[Log, dict[str, int]]:
     before dropped (``repeated_fixes``; the first copy is kept, its stamp
     nearest the fix), and those of a frozen receiver (``frozen_fixes``), gyro samples at the gyro's rail dropped
     (``saturated``), GPS stamps moved back by the configured
-    ``[gps] time_offset`` (a fix stamped t was taken at t - offset), then
+    ``[gps] time_offset`` (a fix stamped t was taken at t - offset; the
+    returned robot's offset is then 0: spent), then
     ``despike``. Returns it with the spikes taken out per sensor (the
     repeated fixes and the rail are not rejections: ``repeat_notes`` and
     ``saturation_notes`` say them, and pipeline.estimate makes those warnings).
