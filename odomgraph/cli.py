@@ -720,8 +720,12 @@ def calibrate(
         cv = ", ".join(f"x{r['factor']:g}"
                        + (f" (ran at accel {r['accel']:.3g}, yaw {r['yaw_accel']:.3g}: the wheels' floor)"
                           if floored(r) else "") + f": {100 * r['rms_m']:.2f} cm" for r in pn["held_out_rms_m"])
+        rms = {r["factor"]: r["rms_m"] for r in pn["held_out_rms_m"]}
+        pick, best = pn.get("chosen_factor"), min(rms, key=rms.get)
+        why = (f"; x{pick:g} kept: x{best:g} is not better beyond the held-out errors' scatter"
+               if pick is not None and pick != best and pn.get("lost_m") is None else "")
         _out(f"process noise: accel {pn['accel']:.3g} m/s^2/sqrt(Hz), yaw {pn['yaw_accel']:.3g} rad/s^2/sqrt(Hz) "
-                   f"(held-out fix error by multiple of the default: {cv})")
+                   f"(held-out fix error by multiple of the default: {cv}{why})")
     a, b = rep["dead_reckoning_nominal"], rep["dead_reckoning_calibrated"]
     _out(f"dead reckoning on this log (vs {rep['reference']}): RMS {a['rms_m']:.3f} -> {b['rms_m']:.3f} m, "
                f"final {a['final_m']:.3f} -> {b['final_m']:.3f} m")

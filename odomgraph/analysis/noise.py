@@ -42,7 +42,8 @@ MIN_COUNT = 20
 
 def noise_scales(est, log) -> dict[str, float]:
     """{sensor: scale} for GPS and ranges: the factor by which the configured
-    sigma would have to grow to match what the data scatter (1: right)."""
+    sigma would have to grow to match what the data scatter (1: right);
+    ``measured_from`` says from what."""
     from odomgraph.estimators.measurements import clean
     log = clean(log)[0]
     out = {}
@@ -55,6 +56,23 @@ def noise_scales(est, log) -> dict[str, float]:
         if u is not None and u.size >= MIN_COUNT:
             out[sensor] = float(1.4826 * np.median(np.abs(u)))
     return out
+
+
+def measured_from(est, sensor: str) -> str:
+    """What noise_scales measured ``sensor``'s scale from: "innovations" (a
+    filter's, MIN_COUNT of them at least), "residuals" (a smoother's post-fit
+    residuals) or "predictions" (a filter with fewer innovations, whose rows
+    at a measurement's time are its prediction: the residuals there carry
+    its dead reckoning's error as much as the sensor's).
+
+    The last measures the fixes against the filter's path, not the sensor's
+    noise: a probe's 0.2 Hz fixes (18 accepted) lay 16x further from the
+    EKF's predicted path than the 0.02 m GPS sigma, and calibrate --method
+    ekf wrote 0.317 m as the GPS's sigma; batch measured the sensor right."""
+    inn = est.innovations.get(sensor)
+    if inn is not None and inn.nis.size >= MIN_COUNT:
+        return "innovations"
+    return "predictions" if est.innovations else "residuals"
 
 
 #: Rate [Hz] of the interval averages the wheels' accelerations are measured at
