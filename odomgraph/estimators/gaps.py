@@ -85,11 +85,7 @@ def widen_gaps(t: np.ndarray, mean: np.ndarray, sigma: np.ndarray, pose_cov: np.
         # curves, slip moved to another time moves the row along another
         # direction (yard, a stall in a curve: 0.14 m across the track at a
         # cross-track sigma of 0.02 m).
-        sigma[sel, 0] = np.sqrt(sigma[sel, 0] ** 2 + var)
-        sigma[sel, 1] = np.sqrt(sigma[sel, 1] ** 2 + var)
-        if pose_cov is not None:
-            pose_cov[sel, 0, 0] += var
-            pose_cov[sel, 1, 1] += var
+        add_pose_variance(sigma, pose_cov, sel, var)
         out.append((a, b, dist, matters))
     return out
 
@@ -288,7 +284,7 @@ def pause_variance(t: np.ndarray, pauses) -> tuple[np.ndarray, np.ndarray]:
         sel = (t > a) & (t < b)
         f = (t[sel] - a) / (b - a)
         pos[sel] += dist ** 2 * f * (1.0 - f)
-        if dist >= MIN_DISTANCE or turn >= MIN_TURN:
+        if turns_unknown(dist, turn):
             th[sel] += np.pi ** 2 * 4.0 * f * (1.0 - f)
     return pos, th
 
@@ -298,20 +294,40 @@ def widen_pauses(t: np.ndarray, sigma: np.ndarray, pose_cov: np.ndarray | None, 
     by pause_variance. Returns the number of rows widened."""
     pos, th = pause_variance(t, pauses)
     sel = (pos > 0) | (th > 0)
-    sigma[sel, S.X] = np.sqrt(sigma[sel, S.X] ** 2 + pos[sel])
-    sigma[sel, S.Y] = np.sqrt(sigma[sel, S.Y] ** 2 + pos[sel])
-    sigma[sel, S.THETA] = np.sqrt(sigma[sel, S.THETA] ** 2 + th[sel])
-    if pose_cov is not None:
-        pose_cov[sel, 0, 0] += pos[sel]
-        pose_cov[sel, 1, 1] += pos[sel]
-        pose_cov[sel, 2, 2] += th[sel]
+    add_pose_variance(sigma, pose_cov, sel, pos[sel], th[sel])
     return int(sel.sum())
+
+
+def add_pose_variance(sigma: np.ndarray, pose_cov: np.ndarray | None, sel, xy, theta=None) -> None:
+    """Add variance ``xy`` [m^2] to x and to y, and ``theta`` [rad^2] to the
+    heading, of the rows ``sel`` (a mask or indices) of sigma (N, 11) and
+    pose_cov (N, 3, 3) or None, in place: independent errors the rows'
+    covariance did not hold (a gap's slip, a silence's path, the circle of
+    an unknown heading). ``xy`` and ``theta`` are scalars or one per row."""
+    sigma[sel, S.X] = np.sqrt(sigma[sel, S.X] ** 2 + xy)
+    sigma[sel, S.Y] = np.sqrt(sigma[sel, S.Y] ** 2 + xy)
+    if theta is not None:
+        sigma[sel, S.THETA] = np.sqrt(sigma[sel, S.THETA] ** 2 + theta)
+    if pose_cov is not None:
+        pose_cov[sel, 0, 0] += xy
+        pose_cov[sel, 1, 1] += xy
+        if theta is not None:
+            pose_cov[sel, 2, 2] += theta
 
 
 def pause_note(method: str, pauses) -> list[str]:
     """The line naming each silence whose rows were widened, or []."""
     if not pauses:
         return []
-    parts = ", ".join(f"t={a:.1f}-{b:.1f} s ({b - a:.4g} s, {d:.2f} m)" for a, b, d, _ in pauses)
+    turned = [turns_unknown(d, r) for _, _, d, r in pauses]
+    parts = ", ".join(f"t={a:.1f}-{b:.1f} s ({b - a:.4g} s, {d:.2f} m" + (", heading unknown" if u else "") + ")"
+                      for (a, b, d, _), u in zip(pauses, turned))
     return [f"{method}: no sensor spoke during {parts}: the rows inside are drawn between the states either side, "
-            "and carry the unknown path's shape in their sigma (up to half the distance, and the heading)"]
+            "and carry the unknown path's shape in their sigma (up to half the distance"
+            + (", and the heading where it says so)" if any(turned) else ")")]
+
+
+def turns_unknown(dist: float, turn: float) -> bool:
+    """Whether a silence's heading is widened (pause_variance): the robot
+    moved ``dist`` [m] or turned ``turn`` [rad] through it at all."""
+    return dist >= MIN_DISTANCE or turn >= MIN_TURN

@@ -40,6 +40,8 @@ from collections import deque
 
 import numpy as np
 
+from odomgraph.estimators.gaps import add_pose_variance
+
 #: Trailing window of fixes whose median tells motion from noise: this many at
 #: least, and at least FIX_WINDOW_S seconds of them.
 FIX_MEDIAN_N = 5
@@ -222,14 +224,10 @@ def widen_rows(t: np.ndarray, sigma: np.ndarray, pose_cov: np.ndarray | None, un
     n = int(sel.sum())
     if not n:
         return 0
-    add = circle_variance(watch.arm_at(np.asarray(t)[sel]))
-    sigma[sel, 0] = np.sqrt(sigma[sel, 0] ** 2 + add)
-    sigma[sel, 1] = np.sqrt(sigma[sel, 1] ** 2 + add)
+    add_pose_variance(sigma, pose_cov, sel, circle_variance(watch.arm_at(np.asarray(t)[sel])))
     sigma[sel, 2] = np.maximum(sigma[sel, 2], math.pi)
     if pose_cov is not None:
         pc = pose_cov[sel]
-        pc[:, 0, 0] += add
-        pc[:, 1, 1] += add
         th = np.sqrt(np.maximum(pc[:, 2, 2], 1e-300))
         f = np.maximum(math.pi / th, 1.0)          # scale theta's row and column: stays positive semi-definite
         pc[:, 2, :] *= f[:, None]
