@@ -138,6 +138,12 @@ def pinned_basis(obs: Observability) -> np.ndarray:
     return q
 
 
+def held_pins(obs: Observability) -> tuple[np.ndarray, bool]:
+    """(pinned_basis (3, k), whether the common scale is among the pins): what
+    the filters' encoder update holds (estimators.ekf.held_directions)."""
+    return pinned_basis(obs), "scale_common" in obs.unobservable
+
+
 def prior_scale_cov(obs: Observability, sigma: float) -> np.ndarray:
     """(3, 3) prior covariance of the scale factors for the estimators: sigma^2
     in every direction, PIN_SIGMA^2 along the pinned combinations."""

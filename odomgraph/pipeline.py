@@ -450,8 +450,8 @@ def _window_warnings(est: Estimate, log: Log, schedule: Schedule) -> list[str]:
     # track against the gyro (the common scale is reported undetermined).
     sensors, what = (absolute, "absolute measurements") if absolute else ([log.gyro], "gyro samples")
     from odomgraph.analysis.metrics import gps_times
-    n = sum(int(np.sum(((gps_times(log) if s is log.gps else s.t) >= est.t[0])
-                       & ((gps_times(log) if s is log.gps else s.t) < t_end))) for s in sensors if s is not None)
+    stamps = [gps_times(log) if s is log.gps else s.t for s in sensors if s is not None]
+    n = sum(int(np.sum((t >= est.t[0]) & (t < t_end))) for t in stamps)
     if n < MIN_WINDOW_FIXES:
         return [f"the calibration window (t={est.t[0]:.1f}-{t_end:.1f} s) holds only {n} {what}: "
                 "too few to calibrate the scale factors in it; lengthen --calibrate-until"]

@@ -36,7 +36,7 @@ from odomgraph.estimators.heading import HeadingWatch, circle_variance
 from odomgraph.estimators.initial import InitialState, initial_state
 from odomgraph.estimators.measurements import (PAUSE_PATH_SHARE, PAUSE_S, PAUSE_TURN_SHARE, from_log, pause_spans,
                                                 slip_intensity)
-from odomgraph.observability import decondition, pinned_basis
+from odomgraph.observability import decondition, held_pins
 from odomgraph.estimators.slipcheck import in_stretches, in_window
 from odomgraph.result import Estimate, Innovations
 from odomgraph.estimators.schedule import Hold, Schedule
@@ -333,7 +333,7 @@ class EKF:
             self._rates = rate_noise(self._q, self._q_slip)
         if "_pinned" in state and "_held" not in state:     # nor the pins' basis
             obs = self.init.observability
-            self._held = (pinned_basis(obs), "scale_common" in obs.unobservable)
+            self._held = held_pins(obs)
 
     # ------------------------------------------------------------ predict
     def predict(self, t: float) -> None:
@@ -530,7 +530,7 @@ class EKF:
         self.pauses, self.pause_travel = [], []
         obs = self.init.observability
         self._pinned = bool(obs.unobservable)
-        self._held = (pinned_basis(obs), "scale_common" in obs.unobservable)   # (held_directions)
+        self._held = held_pins(obs)   # (held_directions)
         # The schedule's window, less where the fixes say the wheels slipped (slipcheck).
         # (the schedule's own stretches are the pipeline's, which says why: analysis.windowfit)
         self.slipping = in_window(sch.slip_stretches(self.init.slipping), m.t_start, self.t_switch)[0]

@@ -28,7 +28,7 @@ from odomgraph.estimators.sensors import (DOF, ENC_IDX, GATED, GPS, GYRO, GYRO_I
                                          SENSOR_NAMES, SLIP_IDX, VEL, VEL_IDX, WHEEL, event_stream)
 from odomgraph.estimators.initial import initial_state
 from odomgraph.estimators.measurements import from_log, slip_intensity
-from odomgraph.observability import decondition, pinned_basis
+from odomgraph.observability import decondition, held_pins
 from odomgraph.estimators.slipcheck import in_stretches, in_window
 from odomgraph.result import Estimate
 from odomgraph.estimators.schedule import Hold, Schedule
@@ -93,7 +93,7 @@ def run_ekf_many(logs: list[Log], schedule: Schedule = Schedule(), options: EKFO
     _check_same_timing(logs, streams)
     t_ev, code_ev, row_ev = streams[0]
     obs = inits[0].observability
-    pins = (pinned_basis(obs), "scale_common" in obs.unobservable)          # (ekf.held_directions)
+    pins = held_pins(obs)          # (ekf.held_directions)
     # As ekf.EKF, with the first run's slipping stretches (the runs share their motion).
     r, m0, sch, opt = logs[0].robot, meas[0], schedule, options
 
