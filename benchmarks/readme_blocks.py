@@ -1103,7 +1103,7 @@ def real_data_findings(results: Path) -> str:
     d = _load("real_data", results)
     why, cal = d["square_why"], d["square_calibration"]
     curve = cal["process_noise"]["held_out_rms_m"]
-    chosen = min(curve, key=lambda c: c["rms_m"])["factor"]
+    chosen = cal["process_noise"].get("chosen_factor") or min(curve, key=lambda c: c["rms_m"])["factor"]
     share = [d["dr_circular"]["share_of_oracle_improvement"], d["dr_free"]["share_of_oracle_improvement"]]
     two = [d["dr_circular"]["share_2hz_fixes"], d["dr_free"]["share_2hz_fixes"]]
     var = why["variants"]

@@ -567,6 +567,8 @@ def _with_noise_scales(est: Estimate, log: Log, method: Method, schedule: Schedu
                    + (f", and their errors persist from one measurement to the next (lag-1 correlation "
                       f"{corr.get(k, (0.0, 1.0))[0]:.2f}, worth {corr.get(k, (0.0, 1.0))[1]:.2g}x)"
                       if corr.get(k, (0.0, 1.0))[1] > 1.0 else ""))
+            if source[k] == "predictions":
+                why += " (measured against the filter's predicted path: not the sensor's noise alone)"
             est.warnings.append(f"gps: {why}: every fix's sigma was widened {f:.2g}x for this run (calibrate "
                                 "cannot write it: robot.toml's gps sigma is used only where gps.csv has none)")
             continue
@@ -580,10 +582,9 @@ def _with_noise_scales(est: Estimate, log: Log, method: Method, schedule: Schedu
             # (analysis.noise.measured_from: the fixes against the filter's path, not the sensor's noise)
             n = first.innovations[k].nis.size if k in first.innovations else 0
             est.warnings.append(
-                f"{k}: the measurements lie {measured[k]:.2g}x further from the filter's predicted path than "
-                f"robot.toml's sigma ({conf:.3g} m) says, and {n} accepted updates are too few to tell the "
-                f"sensor's noise from the prediction's: the sigma was widened {f:.2g}x to {conf * f:.3g} m for "
-                "this run; calibrate does not write it back (--method batch measures the sensor)")
+                f"{k}: measured against the filter's predicted path ({n} accepted updates are too few to tell the "
+                f"sensor's noise from the prediction's), {why}: the sigma was widened {f:.2g}x to {conf * f:.3g} m "
+                "for this run; calibrate does not write it back (--method batch measures the sensor)")
             continue
         est.warnings.append(f"{k}: {why}: the sigma was widened {f:.2g}x to {conf * f:.3g} m for this run "
                             "(calibrate writes it back)")
@@ -794,14 +795,19 @@ def tune_process_noise(log: Log, schedule: Schedule, method: Method = Method.bat
     (accel, yaw_accel) the estimator runs on the rest, and the one whose path
     best predicts the held-out fixes wins (2-fold would double the cost for
     little: the held-out fixes interleave with the used ones), if it beats
-    the lowest candidate that ran beyond chance (_beats); else that one.
+    the lowest candidate that ran beyond chance (_beats); else the lowest
+    does. When every candidate of a filter misses the held-out fixes by
+    PROCESS_NOISE_LOST of their sigmas or more (the sigmas the runs used,
+    after the noise model's widening: _sigma_used), the filter is lost on
+    them and nothing is tuned: robot.toml's process noise is kept.
 
     Returns (ProcessNoise, table of (factor, held-out RMS [m], the
-    ProcessNoise that ran)), or
-    (log.robot.process, []) when the log has too few fixes. A candidate below
-    the wheels' own motion intensity (analysis.noise.motion_scales) runs with
-    that intensity instead, for accel and yaw_accel each; candidates that
-    come out identical run once, under the lowest factor.
+    ProcessNoise that ran), lost: the best held-out RMS [m] when nothing was
+    tuned for it, else None), or (log.robot.process, [], None) when the log
+    has too few fixes. A candidate below the wheels' own motion intensity
+    (analysis.noise.motion_scales) runs with that intensity instead, for
+    accel and yaw_accel each; candidates that come out identical run once,
+    under the lowest factor.
     """
     import numpy as np
     from dataclasses import replace
@@ -811,7 +817,7 @@ def tune_process_noise(log: Log, schedule: Schedule, method: Method = Method.bat
     split = _split_fixes(log)
     base = log.robot.process
     if split is None:
-        return base, []
+        return base, [], None
     train, held = split
     d = ProcessNoise()
     # A candidate below the wheels' own intensity would be widened to it by
@@ -821,7 +827,8 @@ def tune_process_noise(log: Log, schedule: Schedule, method: Method = Method.bat
     if options.get("fit_noise", True):
         from odomgraph.analysis.noise import motion_scales, widened_motion
         floor = widened_motion(log, motion_scales(log)).robot.process
-    table, tried, errors = [], set(), []
+    sensor = "gps" if held.gps is not None else "ranges"
+    table, tried, errors, used = [], set(), [], []
     for j, f in enumerate(PROCESS_NOISE_FACTORS):
         pn = replace(base, accel=max(d.accel * f, floor.accel), yaw_accel=max(d.yaw_accel * f, floor.yaw_accel))
         if (pn.accel, pn.yaw_accel) in tried:
@@ -831,37 +838,42 @@ def tune_process_noise(log: Log, schedule: Schedule, method: Method = Method.bat
             est = estimate(train.with_(robot=train.robot.with_(process=pn)), method, schedule, **options)
         except EstimatorDivergedError:
             continue
-        res = gps_deviation(est, held) if held.gps is not None else range_residuals(est, held)
+        res = gps_deviation(est, held) if sensor == "gps" else range_residuals(est, held)
         table.append((f, float(np.sqrt(np.mean(res[1] ** 2))), pn))
         errors.append(res)
+        used.append(_sigma_used(held, sensor, est) if est.innovations else np.inf)
         if progress is not None:
             progress(j + 1, len(PROCESS_NOISE_FACTORS) + 1)
     if not table:
-        return base, []
+        return base, [], None
     b = min(range(len(table)), key=lambda i: table[i][1])
-    keep = b == 0 or lost_tuning(table, held) or not _beats(errors[b], errors[0])
-    return table[0 if keep else b][2], table
+    if table[b][1] >= PROCESS_NOISE_LOST * used[b]:
+        return base, table, table[b][1]
+    return table[b if b > 0 and _beats(errors[b], errors[0]) else 0][2], table, None
 
 
 #: Held-out errors this many fix sigmas away, for every candidate, say the
-#: estimator is lost on half the fixes: no candidate is better, all are bad.
+#: estimator is lost on them: no candidate is better, all are bad.
 PROCESS_NOISE_LOST = 50.0
 
 
-def lost_tuning(table, log: Log) -> float | None:
-    """The best held-out RMS [m] of tune_process_noise's ``table`` when it
-    is PROCESS_NOISE_LOST of the fixes' sigmas or more (the fixes' median
-    sigma, else robot.toml's; ranges: its range sigma), else None. An EKF
-    on every other 0.2 Hz fix missed them by 6.5-8.5 m for every candidate,
-    and calibrate wrote 20-40x the default for 3-12 % less."""
-    if not table:
-        return None
-    if log.gps is not None and len(log.gps.t):
-        sig = float(np.median(log.gps.sigma)) if log.gps.sigma is not None else log.robot.gps_sigma
+def _sigma_used(log: Log, sensor: str, est: Estimate) -> float:
+    """The sigma [m] a run ``est`` gave ``sensor``'s measurements in ``log``:
+    the fixes' median own sigma, else robot.toml's, times the noise model's
+    widening where it measured the sensor (not a filter's predictions:
+    analysis.noise.measured_from). An EKF on every other 0.2 Hz fix missed
+    them by 6.5-8.5 m for every candidate, and calibrate wrote 20-40x the
+    default for 3-12 % less. Only a filter's runs are judged so: a
+    smoother's post-fit residuals measure a sigma low (configured 100x too
+    small, batch measured 1.8x and then followed every fix), and its held-out
+    errors are then hundreds of sigmas without its being lost."""
+    if sensor == "gps":
+        g = log.gps
+        sig = float(np.median(g.sigma)) if g.sigma is not None else log.robot.gps_sigma
     else:
         sig = log.robot.range_sigma
-    best = min(r[1] for r in table)
-    return best if best >= PROCESS_NOISE_LOST * sig else None
+    ns = est.noise_scales.get(sensor, {})
+    return sig * (ns.get("applied", 1.0) if ns.get("from") != "predictions" else 1.0)
 
 
 #: A candidate replaces the lowest that ran only when its held-out squared
@@ -875,8 +887,11 @@ def _beats(a, b) -> bool:
     squares below -PROCESS_NOISE_Z standard errors. Without it calibrate
     wrote 10x the default process noise for held-out errors of 752 cm
     against 762 cm (an EKF on 0.1 Hz fixes: every candidate was as bad)."""
-    _, ia, ib = np.intersect1d(a[0], b[0], return_indices=True)
-    d = a[1][ia] ** 2 - b[1][ib] ** 2
+    if np.array_equal(a[0], b[0]):
+        d = a[1] ** 2 - b[1] ** 2          # (ranges share stamps across beacons: pair by row)
+    else:
+        _, ia, ib = np.intersect1d(a[0], b[0], return_indices=True)
+        d = a[1][ia] ** 2 - b[1][ib] ** 2
     if d.size < 3:
         return False
     return float(d.mean()) < -PROCESS_NOISE_Z * float(d.std(ddof=1)) / np.sqrt(d.size)
@@ -897,9 +912,9 @@ def calibrate(log: Log, schedule: Schedule = Schedule(calibrate_until=None), met
     from odomgraph.io.log import rebased
     log = rebased(log)  # Log.t_origin
     from odomgraph.analysis.deadreckoning import dead_reckon
-    table = []
+    table, lost = [], None
     if tune:
-        process, table = tune_process_noise(log, schedule, method, progress, **options)
+        process, table, lost = tune_process_noise(log, schedule, method, progress, **options)
         log = log.with_(robot=log.robot.with_(process=process))
     est = estimate(log, method, schedule, progress, **options)
     gyro = None
@@ -929,7 +944,7 @@ def calibrate(log: Log, schedule: Schedule = Schedule(calibrate_until=None), met
                           "held_out_rms_m": [{"factor": f, "rms_m": e, "accel": p.accel, "yaw_accel": p.yaw_accel}
                                              for f, e, p in table],
                           "chosen_factor": next((f for f, _, p in table if p == r.process), None),
-                          "lost_m": lost_tuning(table, log)},
+                          "lost_m": lost},
     }
     # Dead reckoning on this log, against truth or else the smoother's own path.
     start = (est.t[0], *est.mean[0, 0:3])
@@ -948,11 +963,11 @@ def calibrate(log: Log, schedule: Schedule = Schedule(calibrate_until=None), met
         report["gyro_scale"] = {n: gyro[n] for n in ("value", "sigma", "determined", "corrected")}
         if gyro["line"]:
             report["warnings"].append(gyro["line"])
-    if report["process_noise"]["lost_m"] is not None:
+    if lost is not None:
         report["warnings"].append(
             f"process noise not tuned: with every other fix held out, every candidate's estimate missed them by "
-            f"{report['process_noise']['lost_m']:.3g} m RMS or more, over {PROCESS_NOISE_LOST:g} of their sigmas: "
-            f"{est.method} is lost on half of this log's fixes, and may be on all of them (the default is kept)")
+            f"{lost:.3g} m RMS or more, over {PROCESS_NOISE_LOST:g} of the sigmas it gave them: {est.method} does "
+            "not follow this log's fixes, so none is better; robot.toml's process noise is kept")
     per_fix = log.gps is not None and log.gps.sigma is not None
     new = _with_fitted_noise(new, est, report["warnings"], per_fix_gps=per_fix)
     # what is written, after the data's widening (the tuned value is its floor)
@@ -975,7 +990,8 @@ def _gyro_scale(log: Log, est: Estimate, schedule: Schedule, options: dict) -> d
     "determined", "corrected", "sensitivity" (3,) d scale / d g, "line"}."""
     from odomgraph.analysis import gyroscale as G
     from odomgraph.analysis.noise import widened
-    fitted = widened(log, {k: v["applied"] for k, v in est.noise_scales.items()})
+    # (not a filter's widening from its predictions: it is the run's, not the sensor's; analysis.noise.measured_from)
+    fitted = widened(log, {k: v["applied"] for k, v in est.noise_scales.items() if v.get("from") != "predictions"})
     if est.time_offsets.get("gps"):
         # the GPS clock the run estimated (a clock off moves the fixes along the path: every turn with it)
         fitted = fitted.with_(robot=fitted.robot.with_(gps_time_offset=est.time_offsets["gps"]["value"]))

@@ -57,10 +57,11 @@ class Estimate:
     """Each time the estimator caught itself diverging and recovered, with when and how."""
     time_offsets: dict[str, dict[str, float]] = field(default_factory=dict)
     """Sensor time offsets estimated and applied, {"gps": {"value", "sigma"}} [s]."""
-    noise_scales: dict[str, dict[str, float]] = field(default_factory=dict)
+    noise_scales: dict[str, dict[str, float | str]] = field(default_factory=dict)
     """Per sensor (gps, ranges), the factor by which the data scatter beyond
     robot.toml's sigma ("measured"), the lag-1 correlation of its residuals
-    ("correlation") and the factor the sigma was widened by ("applied");
+    ("correlation"), the factor the sigma was widened by ("applied") and
+    what the scatter was measured from ("from": analysis.noise.measured_from);
     per velocity random walk ([process] accel, yaw_accel), the factor by which
     the wheels' own motion exceeds it ("measured") and the widening
     ("applied"). analysis.noise."""

@@ -7,7 +7,10 @@ of positions inside 3 sigma). The scale of each absolute sensor is measured
 robustly (medians, so outliers do not count): from the EKF's innovations,
 which are independent of the update they feed (median NIS against the
 chi-square median of their dimension), or from a smoother's post-fit
-residuals (1.4826 MAD of the whitened residuals). Post-fit residuals are
+residuals (1.4826 MAD of the whitened residuals); a filter with too few
+innovations, from its rows at the measurements' times, which are its
+predictions: that scale is the run's only, not the sensor's
+(``measured_from``). Post-fit residuals are
 smaller than the noise by the share of each fix the smoother absorbs, so
 from a smoother the scale errs low; ``pipeline.estimate`` only ever widens a
 sigma with it, never narrows one.
@@ -236,8 +239,10 @@ def _residual_channels(est, log, sensor: str) -> list[tuple[np.ndarray, np.ndarr
 
 
 def _whitened_residuals(est, log, sensor: str) -> np.ndarray | None:
-    """Post-fit residuals of one sensor against the estimate, divided by their
-    sigma (per axis), from the residuals the metrics use (analysis.metrics)."""
+    """Residuals of one sensor against the estimate's rows, divided by their
+    sigma (per axis), from the residuals the metrics use (analysis.metrics):
+    post-fit for a smoother, mostly the prediction's for a filter
+    (measured_from)."""
     from odomgraph.analysis.metrics import gps_residuals, range_residuals
     if sensor == "gps":
         res = gps_residuals(est, log)

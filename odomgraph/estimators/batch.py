@@ -22,7 +22,7 @@ import numpy as np
 
 from odomgraph.factors import pose2
 from odomgraph.factors._math import wrap_angle
-from odomgraph.factors.motion import propagate, velocity_between
+from odomgraph.factors.motion import arc_at, propagate, velocity_between
 from odomgraph import state as S
 from odomgraph.checks import bounded, check_fields
 from odomgraph.errors import EstimatorDivergedError
@@ -551,16 +551,17 @@ def honest_blocks(prob: Problem, Sig: np.ndarray) -> np.ndarray:
 
 def keyframe_rows(prob: Problem, pose: np.ndarray, W: np.ndarray, Sig: np.ndarray | None, method: str,
                   rows: slice = slice(None)) -> Estimate:
-    """States at interval midpoints: the pose flown half an interval from X_k, W_k's averages.
+    """States at interval midpoints: the pose flown from X_k along W_k's arc
+    as far as the wheels got by then (Keyframes.mid_tau_vw, motion.arc_at).
 
     Row k describes interval k, so its velocity, slip and bias are the averages
     they are estimated as; sigma is propagated through the same arc.
     """
     kf = prob.kf
     k = np.arange(kf.n - 1)[rows]
-    half = 0.5 * kf.dt[k]
-    t = kf.t[k] + half
-    p, Jf = propagate(pose[k, 0], pose[k, 1], pose[k, 2], W[k, 0], W[k, 1], half)
+    t = kf.t[k] + 0.5 * kf.dt[k]
+    tau = kf.mid_tau_vw[k]
+    p, Jf = arc_at(pose[k, 0], pose[k, 1], pose[k, 2], W[k, 0], W[k, 1], tau[:, 0], tau[:, 1])
     mean = np.empty((len(k), S.N))
     mean[:, 0:2] = p[:, 0:2]
     mean[:, 2] = wrap_angle(p[:, 2])

@@ -787,8 +787,8 @@ class ISAM2Runner(_Runner):
         """The causal estimate at t_k, of the state at the midpoint of the
         interval just completed (its averages are what the smoother knows)."""
         isam, kf = self.isam, self.prob.kf
-        half = 0.5 * kf.dt[k - 1]
-        p, Jf = propagate(*self.pose[k - 1], self.W[k - 1, 0], self.W[k - 1, 1], half)
+        tau = kf.mid_tau_vw[k - 1]          # as far as the wheels got by the midpoint (batch.keyframe_rows)
+        p, Jf = arc_at(*self.pose[k - 1], self.W[k - 1, 0], self.W[k - 1, 1], tau[0], tau[1])
         row = np.empty(St.N)
         row[0:2], row[2] = p[0:2], wrap_angle(p[2])
         row[3:] = self.W[k - 1]
