@@ -72,7 +72,8 @@ class Keyframes:
     """(R,) index of the beacon in robot.beacons."""
     mid_tau_vw: np.ndarray
     """(N-1, 2) effective times (tau_v, tau_omega) of each interval's
-    midpoint, its row's time (batch.keyframe_rows), as gps_tau_vw's [s]."""
+    midpoint, its row's time (batch.keyframe_rows) [s]: tau_v as
+    gps_tau_vw's (the wheels' travel), tau_omega half the interval."""
     gps_t: np.ndarray | None = None
     """(G,) time of each fix [s]."""
 
@@ -337,6 +338,15 @@ def build_keyframes(log: Log, t_start: float, keyframe_hz: float, causal: bool =
             out[:, j] = np.clip(share, 0.0, 1.0) * (t[k + 1] - t[k])
         return out
 
+    # The rows' midpoints. A row flown half an interval at the average speed
+    # is off by a dt^2 / 8 along the track where the robot accelerates: 10 cm
+    # at 20 m/s^2 and 5 Hz keyframes, at a sigma of 5 mm (a probe's fast
+    # robot); the wheels' travel says how far it got. Not how far it turned:
+    # the wheels' difference is slip and noise as much as turning, and its
+    # share put a steady turn's row 3 degrees off at a sigma of 0.4 (a second
+    # read); the turn is taken at half the interval's.
+    mid_tau = effective(np.arange(nint), t[:-1] + 0.5 * np.diff(t))
+    mid_tau[:, 1] = 0.5 * np.diff(t)
     pn = r.process
     gyro_z, gyro_sd, gyro_n = np.zeros(nint), np.full(nint, np.inf), np.zeros(nint, int)
     if log.gyro is not None and len(log.gyro.t):
@@ -371,9 +381,4 @@ def build_keyframes(log: Log, t_start: float, keyframe_hz: float, causal: bool =
     return Keyframes(t=t, enc_m=m, enc_sigma=sigma, gyro_z=gyro_z, gyro_sigma=gyro_sd, gyro_n=np.asarray(gyro_n),
                      vel_z=vel_z, vel_sigma=vel_sd, vel_n=np.asarray(vel_n), gps_k=gk.astype(int), gps_tau_vw=gvw,
                      gps_xy=gxy, gps_sigma=gs, gps_t=gt, rng_k=rk.astype(int), rng_tau_vw=rvw, rng_beacon=rb, rng_z=rz,
-                     rng_id=np.asarray(rid, int),
-                     # A row flown half an interval at the average speed is
-                     # off by a dt^2 / 8 where the robot accelerates: 10 cm at
-                     # 20 m/s^2 and 5 Hz keyframes, at a sigma of 5 mm (a
-                     # probe's fast robot). The wheels say how far it got.
-                     mid_tau_vw=effective(np.arange(nint), t[:-1] + 0.5 * np.diff(t)))
+                     rng_id=np.asarray(rid, int), mid_tau_vw=mid_tau)
