@@ -108,7 +108,8 @@ def arc_at(x, y, theta, v, omega, tau_v, tau_omega):
     keyframe interval the robot is rarely at constant speed, so the smoother
     passes the *effective* times: tau_v = dt x the share of the interval's
     wheel travel done by the measurement time, tau_omega likewise for the
-    wheels' difference (keyframes.py). Both are data, not states.
+    wheels' difference at a fix's time and for the gyro's turn at a row's
+    (odomgraph/estimators/shares.py). Both are data, not states.
 
     Args:
         x, y, theta: (...) pose at the start of the interval, world frame [m, rad].

@@ -516,8 +516,8 @@ def _with_noise_scales(est: Estimate, log: Log, method: Method, schedule: Schedu
     """Widen GPS and range sigmas that the data say are too small, and run
     again (at most twice): every sigma of the estimate inherits them
     (analysis.noise). The scales found and applied go into the result."""
-    from odomgraph.analysis.noise import (WIDEN_ABOVE, correlation_factors, floored, gps_sigma_floor,
-                                          measured_from, noise_scales, widened)
+    from odomgraph.analysis.noise import (NARROW_BELOW, NARROW_MIN_COUNT, WIDEN_ABOVE, correlation_factors, floored,
+                                          gps_sigma_floor, measured_from, noise_scales, widened)
     applied: dict[str, float] = {}
     cur = log
     floor_note = []
@@ -588,7 +588,49 @@ def _with_noise_scales(est: Estimate, log: Log, method: Method, schedule: Schedu
             continue
         est.warnings.append(f"{k}: {why}: the sigma was widened {f:.2g}x to {conf * f:.3g} m for this run "
                             "(calibrate writes it back)")
+    for k, v in measured.items():
+        # A sigma too large is not a wrong answer with a tight sigma, but the
+        # estimate's sigmas are then pessimistic and the fixes weigh too
+        # little against the wheels; and calibrate's process-noise tuning
+        # made up for it at its grid's edge (a probe: 10x too large, x40).
+        # Said, not narrowed: a filter's predictions (measured_from) are no
+        # measure of it, and a narrower sigma is a bet the log cannot undo.
+        # The scale with persistence credited, as the widening takes it:
+        # errors that persist from one fix to the next scatter little about
+        # an estimate that follows them (AR(1) errors at a right sigma
+        # measured 0.09-0.27, and those estimates were over-confident, a
+        # second read). Nor from few measurements (NARROW_MIN_COUNT).
+        count = _count(first, cur, k)
+        v = v * corr.get(k, (0.0, 1.0))[1]
+        if (v >= NARROW_BELOW or k in applied or source[k] == "predictions" or count < NARROW_MIN_COUNT
+                or (k == "gps" and fl is not None)):
+            continue
+        own = k == "gps" and per_fix
+        conf = (f"the fixes' own sigmas (median {float(np.median(log.gps.sigma)):.3g} m)" if own else
+                f"robot.toml's sigma ({log.robot.gps_sigma if k == 'gps' else log.robot.range_sigma:.3g} m)")
+        what = "fixes" if k == "gps" else "ranges"
+        if source[k] == "innovations":
+            # a filter's innovation carries its prediction's spread too: a
+            # process noise 400x the default read the same
+            est.warnings.append(
+                f"{k}: the {what} scatter only {v:.2g}x of what {conf} and the filter's predicted spread say "
+                f"({count} updates): the sigma, or the process noise, looks {1 / max(v, 1e-9):.2g}x too large, so "
+                f"this estimate's sigmas are pessimistic and the {what} count for less than they should; not changed")
+        else:
+            est.warnings.append(
+                f"{k}: the {what} scatter only {v:.2g}x of {conf} about the estimate ({count} of them): it looks "
+                f"{1 / max(v, 1e-9):.2g}x too large, so this estimate's sigmas are pessimistic and the {what} count "
+                f"for less than they should; not changed (set {'the sigma in gps.csv' if own else 'it in robot.toml'})")
     return est
+
+
+def _count(est: Estimate, log: Log, sensor: str) -> int:
+    """How many measurements a noise scale came from (analysis.noise.noise_scales)."""
+    inn = est.innovations.get(sensor)
+    if inn is not None and inn.nis.size:
+        return int(inn.nis.size)
+    src = log.gps if sensor == "gps" else log.ranges
+    return len(src.t) if src is not None else 0
 
 
 def _with_time_offset(log: Log, method: Method, schedule: Schedule, progress, options: dict) -> Estimate:
@@ -744,7 +786,7 @@ def estimate_to_dir(log: Log, out: Path, method: Method, schedule: Schedule, pro
         from odomgraph.analysis.resample import regular_times, resampled
         times = regular_times(est, rate) if rate is not None else src.t
         from dataclasses import replace
-        rows = replace(resampled(est, times), online=est.online)  # online.csv stays the causal estimate
+        rows = replace(resampled(est, times, log), online=est.online)  # online.csv stays the causal estimate
         summ["rows"] = {"rate_hz": rate} if rate is not None else {"at": at}
         summ["rows"]["n"] = int(len(rows.t))
         rows_err = truth_errors(rows, log)
@@ -968,6 +1010,18 @@ def calibrate(log: Log, schedule: Schedule = Schedule(calibrate_until=None), met
             f"process noise not tuned: with every other fix held out, every candidate's estimate missed them by "
             f"{lost:.3g} m RMS or more, over {PROCESS_NOISE_LOST:g} of the sigmas it gave them: {est.method} does "
             "not follow this log's fixes, so none is better; robot.toml's process noise is kept")
+    top = PROCESS_NOISE_FACTORS[-1]
+    if report["process_noise"]["chosen_factor"] == top:
+        # The grid's edge: the held-out fixes favour more still, which a
+        # velocity walk rarely needs; a fix sigma set too large did this (a
+        # probe: 10x too large, x40 with the EKF), and so did errors that
+        # persist from fix to fix (AR(1), a second read: the held-out fixes
+        # share their neighbours' error, and the path that follows them wins).
+        report["warnings"].append(
+            f"process noise chosen at the top of the range tried (x{top:g} the default): the held-out fixes "
+            "favour more still; a GPS or range sigma set too large, errors that persist from one fix to the next "
+            "(multipath, a marker that slid), or motion a velocity random walk does not model (jerks, impacts) "
+            "does this; the value written is the grid's edge, not a fit")
     per_fix = log.gps is not None and log.gps.sigma is not None
     new = _with_fitted_noise(new, est, report["warnings"], per_fix_gps=per_fix)
     # what is written, after the data's widening (the tuned value is its floor)

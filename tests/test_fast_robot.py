@@ -6,7 +6,7 @@ a dt^2 / 8 along the track wherever the robot accelerates: a probe's yard
 robot scaled to 8 m/s (20 m/s^2 at the reversals) had batch and isam2 rows
 10 cm off at a sigma of 5 mm, 8 % of them outside 3 sigma, status ok. The
 rows now go as far along the arc as the wheels got by the midpoint
-(Keyframes.mid_tau_vw; the turn at half the interval's). Logs here: the paper
+(Keyframes.mid_tau_vw; the turn the gyro's share, tests/test_pivot_rows.py). Logs here: the paper
 scenario scaled, other seeds and speeds than the probe's.
 """
 from __future__ import annotations
@@ -45,7 +45,8 @@ def test_rows_follow_the_wheels_through_accelerations(k, seed, method):
     # before: 1.5-2.4 cm along the track, 90-94 % inside 3 sigma (z up to 16)
     assert np.sqrt(np.mean(along**2)) < 0.012
     assert np.mean(z <= 3.0) >= 0.98
-    # the heading stays where it was: the wheels' difference does not say
-    # how far it turned by the midpoint (88 % inside 3 sigma when it did)
+    # the heading stays inside its sigma: not from the wheels' difference,
+    # which does not say how far it turned by the midpoint (88 % inside
+    # 3 sigma when it did)
     assert np.mean(z_th <= 3.0) >= 0.98
     assert truth_errors(est, log).rms_position_m < 0.025

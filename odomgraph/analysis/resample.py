@@ -6,7 +6,10 @@ The smoothers keep one state per keyframe, and evo's default association
 the pose moves along the constant-curvature arc that joins them (the motion
 model of eq. 2-6 with the interval's mean turn rate), corrected linearly so
 that it meets both rows exactly; the other states and every sigma and
-covariance are interpolated linearly. Outside the estimate's span nothing is
+covariance are interpolated linearly. Given the log, a time's place on the
+arc is the share of the wheels' travel done by then, and its heading the
+share of the gyro's turn (estimators.shares, as the smoothers place their
+own rows); else the time's share. Outside the estimate's span nothing is
 extrapolated: those times are dropped.
 """
 from __future__ import annotations
@@ -27,36 +30,45 @@ def _wrap(a: np.ndarray) -> np.ndarray:
     return (a + np.pi) % (2 * np.pi) - np.pi
 
 
-def arc_poses(t0, p0, t1, p1, t) -> np.ndarray:
+def arc_poses(t0, p0, t1, p1, t, shares=None) -> np.ndarray:
     """(M, 3) poses (x, y, theta) [m, m, rad] at times t in [t0, t1] on the
     arc from pose p0 at t0 to p1 at t1 (arrays (M,) and (M, 3), one interval
     per row): heading turns at the constant rate that joins the two
     headings, the position follows the arc of that curvature through the
-    chord's length, and the remaining difference at t1 is spread linearly."""
+    chord's length, and the remaining difference at t1 is spread linearly.
+    ``shares``: (travel, turn) (M,) each, the fractions of the arc's length
+    and of its turn done by t (estimators.shares); None: the time's."""
     dt = np.maximum(t1 - t0, 1e-12)
     s = np.clip((t - t0) / dt, 0.0, 1.0)
+    s_v, s_w = (s, s) if shares is None else shares
     dth = _wrap(p1[:, 2] - p0[:, 2])
     chord = np.hypot(p1[:, 0] - p0[:, 0], p1[:, 1] - p0[:, 1])
     # arc length that gives this chord at this total turn (chord = L sinc(dth/2))
     length = chord / np.maximum(_sinc(dth / 2), 1e-6)
 
-    def at(frac):
-        turn = frac * dth
-        d = frac * length * _sinc(turn / 2)
+    def at(f_v, f_w):
+        # a share f_v of the arc's length along an arc turned by a share f_w
+        # of its turn, as the smoothers' own rows (motion.arc_at)
+        turn = f_w * dth
+        d = f_v * length * _sinc(turn / 2)
         heading = p0[:, 2] + turn / 2
         return np.column_stack([p0[:, 0] + d * np.cos(heading), p0[:, 1] + d * np.sin(heading), p0[:, 2] + turn])
-    end = at(np.ones_like(s))
-    miss = p1 - end
+    one = np.ones_like(s)
+    miss = p1 - at(one, one)
     miss[:, 2] = _wrap(miss[:, 2])
-    out = at(s) + s[:, None] * miss
+    out = at(s_v, s_w) + np.column_stack([s_v, s_v, s_w]) * miss
     out[:, 2] = _wrap(out[:, 2])
     return out
 
 
-def resampled(est: Estimate, times: np.ndarray) -> Estimate:
+def resampled(est: Estimate, times: np.ndarray, log=None) -> Estimate:
     """``est`` at ``times`` [s, est's clock] inside its span (others dropped).
-    Rows of ``est`` at the same time are kept as they are. The result has no
-    innovations or online estimate of its own; every other field is est's."""
+    Rows of ``est`` at the same time are kept as they are. ``log`` (on est's
+    clock): place each time on its arc by the wheels' travel and the gyro's
+    turn, read from the cleaned log as the smoothers read it (a fast
+    robot's rows resampled by time were 1.9 cm off along the track, 93-94 %
+    inside 3 sigma). The result has no innovations or online
+    estimate of its own; every other field is est's."""
     times = np.asarray(times, dtype=float)
     times = times[(times >= est.t[0]) & (times <= est.t[-1])]
     k = np.clip(np.searchsorted(est.t, times, side="right") - 1, 0, max(len(est.t) - 2, 0))
@@ -68,7 +80,14 @@ def resampled(est: Estimate, times: np.ndarray) -> Estimate:
         w = (times - est.t[k]) / np.maximum(est.t[k1] - est.t[k], 1e-12)
     w = np.clip(w, 0.0, 1.0)
     lin = (1 - w)[:, None] * est.mean[k] + w[:, None] * est.mean[k1]
-    pose = arc_poses(est.t[k], est.mean[k][:, S.POSE], est.t[k1], est.mean[k1][:, S.POSE], times)
+    shares = None
+    if log is not None and len(est.t) > 1:
+        from odomgraph.estimators.measurements import clean
+        from odomgraph.estimators.shares import Shares
+        sh = Shares(clean(log)[0])     # an encoder spike moved a 20 Hz row 2.4 cm (a second read)
+        t0, t1 = est.t[k], est.t[k1]
+        shares = (sh.travel(t0, t1, times), sh.gyro_turn(t0, t1, times, w))
+    pose = arc_poses(est.t[k], est.mean[k][:, S.POSE], est.t[k1], est.mean[k1][:, S.POSE], times, shares)
     lin[:, S.POSE] = pose
     sigma = (1 - w)[:, None] * est.sigma[k] + w[:, None] * est.sigma[k1]
     cov = None

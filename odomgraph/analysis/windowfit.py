@@ -115,6 +115,10 @@ def ekf_warning(found: list[tuple[float, float]]) -> str:
 def failed_warning(found: list[tuple[float, float]], exc: Exception) -> str:
     """The line when the run with those seconds out of the window failed."""
     spans = ", ".join(f"{a:.1f}-{b:.1f} s" for a, b in found)
+    # The failure's cause, where the log shows one (a clock offset, a
+    # mounting mistake: pipeline), is said on its own line from the run that
+    # stands; quoted here too it was said twice with two different figures.
+    why = " ".join(str(exc).split()).split("; the log shows why: ")[0]
     return (f"inside the calibration window ({spans}) the fixes sat more than {U_OFF:g} sigma from the estimate "
             f"for seconds on end, where it held slip at zero, and the run with slip estimated there failed "
-            f"({' '.join(str(exc).split())}); not trustworthy")
+            f"({why}); not trustworthy")

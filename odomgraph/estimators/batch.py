@@ -552,7 +552,8 @@ def honest_blocks(prob: Problem, Sig: np.ndarray) -> np.ndarray:
 def keyframe_rows(prob: Problem, pose: np.ndarray, W: np.ndarray, Sig: np.ndarray | None, method: str,
                   rows: slice = slice(None)) -> Estimate:
     """States at interval midpoints: the pose flown from X_k along W_k's arc
-    as far as the wheels got by then (Keyframes.mid_tau_vw, motion.arc_at).
+    as far as the wheels got by then, turned as far as the gyro turned
+    (Keyframes.mid_tau_vw, motion.arc_at).
 
     Row k describes interval k, so its velocity, slip and bias are the averages
     they are estimated as; sigma is propagated through the same arc.

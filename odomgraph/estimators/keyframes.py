@@ -25,6 +25,7 @@ import numpy as np
 
 from odomgraph.factors.encoder import speed_sigma
 from odomgraph.estimators.measurements import PAUSE_S
+from odomgraph.estimators.shares import Shares
 from odomgraph.io.log import Log
 
 W_NAMES = ("v", "omega", "gyro_bias", "slip_left", "slip_right", "scale_left", "scale_right", "scale_track")
@@ -73,7 +74,8 @@ class Keyframes:
     mid_tau_vw: np.ndarray
     """(N-1, 2) effective times (tau_v, tau_omega) of each interval's
     midpoint, its row's time (batch.keyframe_rows) [s]: tau_v as
-    gps_tau_vw's (the wheels' travel), tau_omega half the interval."""
+    gps_tau_vw's (the wheels' travel), tau_omega the gyro's share of the
+    interval's turn (estimators.shares; half the interval without one)."""
     gps_t: np.ndarray | None = None
     """(G,) time of each fix [s]."""
 
@@ -285,7 +287,6 @@ def build_keyframes(log: Log, t_start: float, keyframe_hz: float, causal: bool =
         # quantisation counts once per keyframe interval (only its two ends are floored)
         quant = speed_sigma(np.zeros_like(m), 0.0, 0.0, tpm, dt_k[:, None])
         sigma = np.sqrt((cumv[idx[1:]] - cumv[idx[:-1]]) / dt_k[:, None] ** 2 + quant**2)
-        travel_t, travel = t_all, cum / tpm                                    # wheel travel [m] at each row
     else:
         w = log.wheel_speeds
         first = int(np.searchsorted(w.t, t_start, side="left"))
@@ -311,48 +312,35 @@ def build_keyframes(log: Log, t_start: float, keyframe_hz: float, causal: bool =
             q2 = pn.accel**2 + (0.5 * r.track_width * pn.yaw_accel) ** 2
             m[paused] = 0.0
             sigma[paused] = np.sqrt(sigma[paused] ** 2 + q2 * np.diff(t)[paused, None] / 3.0)
-        # wheel travel by the trapezoid rule between speed samples
-        travel_t = w.t
-        travel = np.concatenate([np.zeros((1, 2)), np.cumsum(0.5 * (ms[1:] + ms[:-1]) * np.diff(w.t)[:, None], 0)])
     nint = len(t) - 1
-    # Forward travel (mean of the wheels) and turning (their difference) at the keyframes.
-    fwd = travel.mean(1)
-    turn = travel[:, 1] - travel[:, 0]
-    # More than two ticks [m]. The quarter tick keeps tick counts off the
-    # threshold: forward travel is a mean of two wheels' whole ticks, so it
-    # moves in half ticks, and at exactly a count on that grid rounding in
-    # the cumulative travel decided (a stream, whose windows sum from another
-    # origin, decided otherwise).
-    eps = 2.25 / max(r.ticks_per_meter_left, r.ticks_per_meter_right, 1.0)
-
-    def effective(k, ts):
-        """(len, 2) effective (tau_v, tau_omega) of times ts in intervals k."""
-        tau = ts - t[k]
-        out = np.empty((len(ts), 2))
-        for j, c in enumerate((fwd, turn)):
-            c0, c1 = np.interp(t[k], travel_t, c), np.interp(t[k + 1], travel_t, c)
-            ct = np.interp(ts, travel_t, c)
-            total = c1 - c0
-            moving = np.abs(total) > eps
-            share = np.where(moving, (ct - c0) / np.where(moving, total, 1.0), tau / (t[k + 1] - t[k]))
-            out[:, j] = np.clip(share, 0.0, 1.0) * (t[k + 1] - t[k])
-        return out
-
-    # The rows' midpoints. A row flown half an interval at the average speed
-    # is off by a dt^2 / 8 along the track where the robot accelerates: 10 cm
-    # at 20 m/s^2 and 5 Hz keyframes, at a sigma of 5 mm (a probe's fast
-    # robot); the wheels' travel says how far it got. Not how far it turned:
-    # the wheels' difference is slip and noise as much as turning, and its
-    # share put a steady turn's row 3 degrees off at a sigma of 0.4 (a second
-    # read); the turn is taken at half the interval's.
-    mid_tau = effective(np.arange(nint), t[:-1] + 0.5 * np.diff(t))
-    mid_tau[:, 1] = 0.5 * np.diff(t)
     pn = r.process
     gyro_z, gyro_sd, gyro_n = np.zeros(nint), np.full(nint, np.inf), np.zeros(nint, int)
     if log.gyro is not None and len(log.gyro.t):
         z, sd, gyro_n = interval_means(t, log.gyro.t, log.gyro.omega, r.gyro_sigma,
                                        np.hypot(pn.yaw_accel, pn.gyro_bias), causal, _max_gap(log.gyro.t, t))
         gyro_z, gyro_sd = z[:, 0], sd[:, 0]
+    # The rows' midpoints. A row flown half an interval at the average speed
+    # is off by a dt^2 / 8 along the track where the robot accelerates: 10 cm
+    # at 20 m/s^2 and 5 Hz keyframes, at a sigma of 5 mm (a probe's fast
+    # robot); the wheels' travel says how far it got. Not how far it turned:
+    # the wheels' difference is slip and noise as much as turning (its share
+    # put a steady turn's row 3 degrees off at a sigma of 0.4, a second read),
+    # and half the interval's turn put the row after a pivot that ended early
+    # in its interval 0.09 rad off at a sigma of 0.007 (a probe's paper log
+    # run 3x faster): the gyro's share, or half without a gyro's turn.
+    sh = Shares(log)
+    t0, t1, tm = t[:-1], t[1:], t[:-1] + 0.5 * np.diff(t)
+    mid_tau = np.stack([sh.travel(t0, t1, tm), sh.gyro_turn(t0, t1, tm, 0.5)], -1) * np.diff(t)[:, None]
+
+    def effective(k, ts):
+        """(len, 2) effective (tau_v, tau_omega) [s] of times ts in intervals
+        k: the shares of the wheels' travel and of their difference, times dt.
+        (The wheels' difference, not the gyro: on a nearly noise-free log it
+        placed the fixes better than a 25 Hz gyro's interpolated turn, track
+        scale 6e-5 against 1.4e-4 off; tests/test_smoothers.py.)"""
+        t0, t1 = t[k], t[k + 1]
+        return np.stack([sh.travel(t0, t1, ts), sh.wheel_turn(t0, t1, ts)], -1) * (t1 - t0)[:, None]
+
     vel_z, vel_sd, vel_n = np.zeros((nint, 2)), np.full((nint, 2), np.inf), np.zeros(nint, int)
     if log.velocity is not None and len(log.velocity.t):
         vel_z, vel_sd, vel_n = interval_means(t, log.velocity.t, np.stack([log.velocity.v, log.velocity.omega], -1),
