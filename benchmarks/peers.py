@@ -103,12 +103,12 @@ def straightforward_graph(prob, k0: int = 0, k1: int | None = None):
             g.add(gf.velocity_factor(WK(k), kf.vel_z[k], gtsam.noiseModel.Diagonal.Sigmas(kf.vel_sigma[k])))
         for i in range(*np.searchsorted(kf.gps_k, [k, k + 1])):
             g.add(gf.gps_factor(XK(k), WK(k), kf.gps_xy[i], kf.gps_tau_vw[i], r.gps_lever_arm,
-                                gtsam.noiseModel.Isotropic.Sigma(2, kf.gps_sigma[i])))
+                                gtsam.noiseModel.Isotropic.Sigma(2, kf.gps_sigma[i]), q=kf.gps_bend[i]))
         for i in range(*np.searchsorted(kf.rng_k, [k, k + 1])):
             g.add(gf.range_factor(XK(k), WK(k), kf.rng_z[i], kf.rng_tau_vw[i], kf.rng_beacon[i], r.range_lever_arm,
-                                  gtsam.noiseModel.Isotropic.Sigma(1, r.range_sigma)))
+                                  gtsam.noiseModel.Isotropic.Sigma(1, r.range_sigma), q=kf.rng_bend[i]))
         g.add(gf.motion_factor(XK(k), WK(k), XK(k + 1), kf.dt[k],
-                               gtsam.noiseModel.Diagonal.Sigmas(1.0 / prob.motion_whiten[k])))
+                               gtsam.noiseModel.Diagonal.Sigmas(1.0 / prob.motion_whiten[k]), q=kf.trans_bend[k]))
         g.push_back(builtins.builtin_factors(k))
     return g
 

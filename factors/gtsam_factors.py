@@ -65,18 +65,19 @@ def _velocity_error(z, this, values, jacobians):
     return h - z
 
 
-def _arc_to(values, kx, kw, tau):
-    """tau: a time [s], or the effective (tau_v, tau_omega) of motion.arc_at."""
+def _arc_to(values, kx, kw, tau, q):
+    """tau: a time [s], or the effective (tau_v, tau_omega) of motion.arc_at;
+    q: the path's bend (motion.bend), or None."""
     x, y, th = _pose(values, kx)
     w = values.atVector(kw)
     tv, tw = (tau, tau) if np.ndim(tau) == 0 else tau
-    p, Jf = arc_at(x, y, th, w[0], w[1], tv, tw)
+    p, Jf = arc_at(x, y, th, w[0], w[1], tv, tw, q)
     return p, Jf, th
 
 
-def _gps_error(z, tau, lever, this, values, jacobians):
+def _gps_error(z, tau, lever, q, this, values, jacobians):
     kx, kw = this.keys()
-    p, Jf, th = _arc_to(values, kx, kw, tau)
+    p, Jf, th = _arc_to(values, kx, kw, tau, q)
     h, Jh = gps.antenna_position(p[0], p[1], p[2], lever)                            # eq. 8-9
     if jacobians is not None:
         Jt = Jh @ Jf
@@ -87,9 +88,9 @@ def _gps_error(z, tau, lever, this, values, jacobians):
     return h - z
 
 
-def _range_error(z, tau, beacon, lever, this, values, jacobians):
+def _range_error(z, tau, beacon, lever, q, this, values, jacobians):
     kx, kw = this.keys()
-    p, Jf, th = _arc_to(values, kx, kw, tau)
+    p, Jf, th = _arc_to(values, kx, kw, tau, q)
     h, Jh = ranging.beacon_range(p[0], p[1], p[2], beacon, lever)                   # eq. 12-16
     if jacobians is not None:
         Jt = Jh[:, 0:3] @ Jf
@@ -100,12 +101,12 @@ def _range_error(z, tau, beacon, lever, this, values, jacobians):
     return h - np.array([z])
 
 
-def _motion_error(dt, this, values, jacobians):
+def _motion_error(dt, q, this, values, jacobians):
     kx0, kw, kx1 = this.keys()
     x, y, th = _pose(values, kx0)
     x1, y1, th1 = _pose(values, kx1)
     w = values.atVector(kw)
-    e, J0, J1 = transition_residual(x, y, th, w[0], w[1], dt, x1, y1, th1)          # eq. 2-6
+    e, J0, J1 = transition_residual(x, y, th, w[0], w[1], dt, x1, y1, th1, q)       # eq. 2-6
     if jacobians is not None:
         jacobians[0] = pose2.to_body(J0[:, 0:3], th)
         JW = np.zeros((3, 6))
@@ -153,22 +154,28 @@ def _tau(tau):
     return float(tau) if np.ndim(tau) == 0 else (float(tau[0]), float(tau[1]))
 
 
-def gps_factor(kx, kw, z, tau, lever, noise) -> gtsam.CustomFactor:
+def _q(q):
+    return None if q is None else np.asarray(q, float)
+
+
+def gps_factor(kx, kw, z, tau, lever, noise, q=None) -> gtsam.CustomFactor:
     """Antenna fix z (2,) [m] at tau after keyframe k, on X(k), W(k); tau [s] is a
-    time or the effective (tau_v, tau_omega) of motion.arc_at."""
+    time or the effective (tau_v, tau_omega) of motion.arc_at; q (4,): the
+    path's bend there (Keyframes.gps_bend), or None: the arc."""
     return gtsam.CustomFactor(noise, [kx, kw], partial(_gps_error, np.asarray(z, float), _tau(tau),
-                                                      tuple(lever)))
+                                                      tuple(lever), _q(q)))
 
 
-def range_factor(kx, kw, z, tau, beacon, lever, noise) -> gtsam.CustomFactor:
+def range_factor(kx, kw, z, tau, beacon, lever, noise, q=None) -> gtsam.CustomFactor:
     """Range z [m] to ``beacon`` (2,) at tau after keyframe k (as gps_factor), on X(k), W(k)."""
     return gtsam.CustomFactor(noise, [kx, kw], partial(_range_error, float(z), _tau(tau),
-                                                      np.asarray(beacon, float), tuple(lever)))
+                                                      np.asarray(beacon, float), tuple(lever), _q(q)))
 
 
-def motion_factor(kx0, kw, kx1, dt, noise) -> gtsam.CustomFactor:
-    """X(k+1) against the arc flown from X(k) with W(k)'s average velocity for dt [s]."""
-    return gtsam.CustomFactor(noise, [kx0, kw, kx1], partial(_motion_error, float(dt)))
+def motion_factor(kx0, kw, kx1, dt, noise, q=None) -> gtsam.CustomFactor:
+    """X(k+1) against the arc flown from X(k) with W(k)'s average velocity for
+    dt [s], its chord bent by q (Keyframes.trans_bend), or None: the arc."""
+    return gtsam.CustomFactor(noise, [kx0, kw, kx1], partial(_motion_error, float(dt), _q(q)))
 
 
 def zero_slip_factor(ks, noise) -> gtsam.CustomFactor:

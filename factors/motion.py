@@ -100,7 +100,47 @@ def velocity_between(x, y, theta, x1, y1, theta1, dt):
     return along / (dt * sinc(half) * np.cos(half)), omega
 
 
-def arc_at(x, y, theta, v, omega, tau_v, tau_omega):
+def bend(pose, J, x, y, theta, q):
+    """The arc's displacement from (x, y) bent to the path's shape: turned
+    and stretched by a complex factor, plus an offset in the start's body
+    frame.
+
+    An arc of the interval's average curvature bends the whole distance; a
+    robot that drove straight and then pivoted went straight (a probe's
+    paper log 3x faster at 2 Hz keyframes: keyframes 0.31 m off at z 14). q
+    is data (estimators.shares.Shares.bend, from the dead-reckoned path and
+    the nominal calibration), (1, 0, 0, 0) for a constant-curvature
+    interval; the heading is the arc's.
+
+    Args:
+        pose: (..., 3) from propagate or arc_at; J: (..., 3, 5) its Jacobian.
+        x, y, theta: (...) the start pose [m, rad].
+        q: (..., 4) (re, im) of the factor, (re, im) of the offset [m, body
+            frame at the start]; or None.
+
+    Returns:
+        pose, J: bent (new arrays); the inputs when q is None.
+    """
+    if q is None:
+        return pose, J
+    q = np.asarray(q, float)
+    a, b, ox, oy = q[..., 0], q[..., 1], q[..., 2], q[..., 3]
+    c, s = np.cos(theta), np.sin(theta)
+    pose, J = pose.copy(), J.copy()
+    dx, dy = pose[..., 0] - x, pose[..., 1] - y
+    pose[..., 0] = x + a * dx - b * dy + c * ox - s * oy
+    pose[..., 1] = y + b * dx + a * dy + s * ox + c * oy
+    # the columns of theta, v, omega move the displacement; x, y the start;
+    # theta turns the offset too
+    jx, jy = J[..., 0, 2:].copy(), J[..., 1, 2:].copy()
+    J[..., 0, 2:] = a[..., None] * jx - b[..., None] * jy
+    J[..., 1, 2:] = b[..., None] * jx + a[..., None] * jy
+    J[..., 0, 2] += -s * ox - c * oy
+    J[..., 1, 2] += c * ox - s * oy
+    return pose, J
+
+
+def arc_at(x, y, theta, v, omega, tau_v, tau_omega, q=None):
     """Pose partway through an interval flown with average velocities (v, omega):
     the arc of length v tau_v that turns by omega tau_omega.
 
@@ -115,6 +155,7 @@ def arc_at(x, y, theta, v, omega, tau_v, tau_omega):
         x, y, theta: (...) pose at the start of the interval, world frame [m, rad].
         v, omega: (...) interval-average forward speed [m/s] and yaw rate [rad/s].
         tau_v, tau_omega: (...) effective times [s].
+        q: (..., 4) the path's bend (``bend``), or None: the arc.
 
     Returns:
         pose: (..., 3); J: (..., 3, 5) d pose / d (x, y, theta, v, omega).
@@ -124,15 +165,16 @@ def arc_at(x, y, theta, v, omega, tau_v, tau_omega):
     pose, J = propagate(x, y, theta, v * tau_v, omega * tau_omega, np.ones_like(tau_v))
     J[..., 3] *= tau_v[..., None]
     J[..., 4] *= tau_omega[..., None]
-    return pose, J
+    return bend(pose, J, x, y, theta, q)
 
 
-def transition_residual(x, y, theta, v, omega, dt, x1, y1, theta1):
+def transition_residual(x, y, theta, v, omega, dt, x1, y1, theta1, q=None):
     """Residual of the next pose against the motion model, in the predicted body frame.
 
     e = [R(theta_p)^T (p1 - p_p), wrap(theta1 - theta_p)] with (p_p, theta_p) =
     propagate(x, y, theta, v, omega, dt): the along-track, lateral [m] and
-    heading [rad] disagreement of pose 1 with the arc flown from pose 0.
+    heading [rad] disagreement of pose 1 with the arc flown from pose 0,
+    its chord bent by q ((..., 4), ``bend``; None: the arc).
 
     Returns:
         e: (..., 3).
@@ -140,7 +182,7 @@ def transition_residual(x, y, theta, v, omega, dt, x1, y1, theta1):
         J1: (..., 3, 3) d e / d (x1, y1, theta1), world-frame coordinates.
     """
     from odomgraph.factors._math import wrap_angle
-    pred, Jf = propagate(x, y, theta, v, omega, dt)
+    pred, Jf = bend(*propagate(x, y, theta, v, omega, dt), x, y, theta, q)
     shape = pred.shape[:-1]
     tp = pred[..., 2]
     c, s = np.cos(tp), np.sin(tp)

@@ -66,7 +66,13 @@ def _with_sideways(est: Estimate, log: Log, schedule: Schedule, run, method: Met
     from odomgraph.analysis import sideways, windowfit
     from odomgraph.errors import OdomgraphError
     from odomgraph.estimators.measurements import runs_of
-    found = sideways.stretches(est)
+    def chords(e: Estimate):
+        if len(e.t) < 3 or (log.encoders is None and log.wheel_speeds is None):
+            return None
+        from odomgraph.estimators.measurements import clean
+        from odomgraph.estimators.shares import Shares
+        return Shares(clean(log)[0]).chord_angle(e.t[:-1], e.t[1:])
+    found = sideways.stretches(est, chords(est))
     if not found:
         return est
 
@@ -115,7 +121,7 @@ def _with_sideways(est: Estimate, log: Log, schedule: Schedule, run, method: Met
                 g, t=g.t[keep], x=g.x[keep], y=g.y[keep], sigma=None if g.sigma is None else g.sigma[keep])))
         except OdomgraphError:
             return None
-        return None if sideways.stretches(e) else e
+        return None if sideways.stretches(e, chords(e)) else e
 
     # Held out, the fixes that sit off the new path by more than their own
     # noise (the rows' sigma there is a dead reckoning's, wide) are the

@@ -51,10 +51,17 @@ def make_factors():
         gf.motion_factor(X(0), W(0), X(1), 0.2, gtsam.noiseModel.Diagonal.Sigmas(np.array([1e-3, 2e-3, 1e-4]))),
         gf.zero_slip_factor(S(0), gtsam.noiseModel.Isotropic.Sigma(2, 1e-3)),
         gf.hold_scale_factor(W(0), [1.0, 1.0, 1.0], gtsam.noiseModel.Isotropic.Sigma(3, 1e-4)),
+        # bent to a path's shape (motion.bend): a factor and an offset
+        gf.gps_factor(X(0), W(0), [1.0, 2.0], (0.05, 0.09), (-0.45, 0.1), gtsam.noiseModel.Isotropic.Sigma(2, 0.05),
+                      q=(0.9, -0.3, 0.04, -0.02)),
+        gf.range_factor(X(0), W(0), 4.0, (0.1, 0.02), [3.0, -2.0], (0.2, 0.0), gtsam.noiseModel.Isotropic.Sigma(1, 0.05),
+                        q=(1.2, 0.4, -0.03, 0.05)),
+        gf.motion_factor(X(0), W(0), X(1), 0.2, gtsam.noiseModel.Diagonal.Sigmas(np.array([1e-3, 2e-3, 1e-4])),
+                         q=(0.95, 0.2, 0.01, 0.03)),
     ]
 
 
-@pytest.mark.parametrize("i", range(8))
+@pytest.mark.parametrize("i", range(11))
 @pytest.mark.parametrize("trial", range(3))
 def test_custom_factor_linearization_matches_numerical_derivatives(i, trial):
     values = random_values()
@@ -95,13 +102,14 @@ def test_vectorised_linearisation_equals_the_custom_factors():
     # first GPS fix of the interval
     g = int(np.searchsorted(kf.gps_k, k))
     f = gf.gps_factor(X(k), W(k), kf.gps_xy[g], kf.gps_tau_vw[g], r.gps_lever_arm,
-                      gtsam.noiseModel.Isotropic.Sigma(2, kf.gps_sigma[g]))
+                      gtsam.noiseModel.Isotropic.Sigma(2, kf.gps_sigma[g]), q=kf.gps_bend[g])
     row = 7 + 2 * prob.gps_slot[g]
     A = f.linearize(values).jacobian()[0]
     np.testing.assert_allclose(A, lin.A_u[0, row:row + 2][:, X_COLS + W_COLS], rtol=1e-9, atol=1e-9)
     np.testing.assert_allclose(f.whitenedError(values), -lin.b_u[0, row:row + 2], rtol=1e-9, atol=1e-9)
     # motion
-    f = gf.motion_factor(X(k), W(k), X(k + 1), kf.dt[k], gtsam.noiseModel.Diagonal.Sigmas(1 / prob.motion_whiten[k]))
+    f = gf.motion_factor(X(k), W(k), X(k + 1), kf.dt[k], gtsam.noiseModel.Diagonal.Sigmas(1 / prob.motion_whiten[k]),
+                         q=kf.trans_bend[k])
     A = f.linearize(values).jacobian()[0]
     np.testing.assert_allclose(A[:, :9], lin.A_m0[0][:, X_COLS + W_COLS], rtol=1e-9, atol=1e-9)
     np.testing.assert_allclose(A[:, 9:], lin.A_m1[0], rtol=1e-9, atol=1e-9)

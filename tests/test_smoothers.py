@@ -231,16 +231,21 @@ def test_robust_gps_survives_gross_outliers(log):
 def test_keyframe_fixes_use_the_wheel_travel_inside_the_interval():
     """Nearly noise-free paper log: whatever error is left is model error. With
     fixes placed on the arc at the share of wheel travel done by their time
-    (motion.arc_at) the scale factors come out within 0.01 %; placed at the
+    (motion.arc_at) ticks/m come out within 0.01 %; placed at the
     share of *time*, as if speed were constant inside the 0.2 s interval, the
-    starts and stops biased ticks/m by 0.05-0.06 %."""
+    starts and stops biased ticks/m by 0.05-0.06 %. The track's scale: 3.2e-4
+    off with the path's bend (Keyframes.trans_bend, gps_bend), as with 20 Hz
+    keyframes, whose arcs are nearly exact (2.1e-4); 6e-5 with plain arcs at
+    5 Hz, whose errors happened to cancel on this seed (on seeds 2-5 plain
+    arcs gave 0.0-4.2e-4, bent 2.5-6.3e-4, 20 Hz 2.9-4.1e-4)."""
     from odomgraph.estimators.batch import build_problem
     sc = paper().with_(gyro_bias=0.0, gyro_bias_walk=0.0, slips=())
     sc = sc.with_(robot=sc.robot.with_(encoder_sigma=(1e-4, 0.0), gps_sigma=2e-3, gyro_sigma=2e-4))
     log = simulate(sc, 0)
     est = run_batch(log, Schedule(20.0))
     err = est.mean[-1, 8:11] / np.array(sc.scales) - 1
-    assert np.all(np.abs(err) < 1e-4), err          # measured 3e-6, 2.7e-5, 6.0e-5
+    assert np.all(np.abs(err[:2]) < 1e-4), err      # measured 8e-7, 2.4e-5
+    assert abs(err[2]) < 5e-4, err                  # measured 3.2e-4
     kf = build_problem(log, Schedule(20.0), SmootherOptions()).kf
     g = log.gps.t[(log.gps.t >= kf.t[0]) & (log.gps.t < kf.t[-1])]   # the fixes the keyframes hold, in order
     tvw, tau = kf.gps_tau_vw, g - kf.t[kf.gps_k]                    # effective and plain time after t_k
@@ -251,26 +256,30 @@ def test_keyframe_fixes_use_the_wheel_travel_inside_the_interval():
 
 def test_fixed_lag_on_far_off_nominal_parameters_relinearises_or_recovers():
     """A robot.toml whose track is half the real one (the libRSF cut's
-    readme, read literally, gives that). Linearised only at predictions made
-    with it, fixed-lag's linear factors leave the ranges: with
-    re-linearisation off (relinearize_after=0, as fixed-lag was) the watch
-    catches it, the window is re-solved, the smoother carries on, says so,
-    and the result is flagged (measured: one re-solve, 1.4-3.5 m RMS at
-    51-58 % coverage). Re-linearised after 2 s inside the window, as
-    isam2's are, it needs no re-solve: 0.13 m RMS, 98 % coverage, flagged
-    for its scale factors far outside their prior."""
+    readme, read literally, gives that). Re-linearised after 2 s inside the
+    window, as isam2's are, fixed-lag needs no re-solve: 0.13 m RMS, 98 %
+    coverage, flagged for its scale factors far outside their prior.
+    Linearised only at predictions made with it (relinearize_after=0, as
+    fixed-lag was), fixed-lag's linear factors can leave the ranges; at half
+    the track the path's bend (Keyframes.trans_bend) now keeps it near them
+    (0.29 m RMS, 86-89 % coverage, no re-solve; 0.9 m at 57 % before), at
+    0.6 of it they leave: the watch catches it, the window is re-solved, the
+    smoother carries on, says so, and the result is flagged (measured: one
+    re-solve, 0.6-0.8 m RMS at 63-77 % coverage)."""
     from pathlib import Path
     from odomgraph.io.importers.librsf import import_librsf
     from odomgraph.pipeline import estimate, status_of
     log = import_librsf(Path(__file__).parent / "data" / "librsf" / "Indoor_UWB_Input.txt")
-    log = log.with_(robot=log.robot.with_(track_width=0.5 * log.robot.track_width))
-    old = estimate(log, "fixed-lag", Schedule(0.0), relinearize_after=0.0)
+    track = log.robot.track_width
+    off = log.with_(robot=log.robot.with_(track_width=0.6 * track))
+    old = estimate(off, "fixed-lag", Schedule(0.0), relinearize_after=0.0)
     assert old.recoveries and all("re-solved" in r for r in old.recoveries)
     assert status_of(old)[0] != "ok"
     # Where that broken run ends up is chaotic (1.4 m RMS, then 3.5 m after a
     # change of 1e-16 in the walks' whitening): only that it finishes,
     # re-solves and is flagged is its behaviour.
-    assert truth_errors(old, log).rms_position_m < 10.0
+    assert truth_errors(old, off).rms_position_m < 10.0
+    log = log.with_(robot=log.robot.with_(track_width=0.5 * track))
     est = estimate(log, "fixed-lag", Schedule(0.0))
     e = truth_errors(est, log)
     assert e.rms_position_m < 0.3 and min(e.coverage_3sigma["x"], e.coverage_3sigma["y"]) >= 0.9, e

@@ -9,7 +9,9 @@ that it meets both rows exactly; the other states and every sigma and
 covariance are interpolated linearly. Given the log, a time's place on the
 arc is the share of the wheels' travel done by then, and its heading the
 share of the gyro's turn (estimators.shares, as the smoothers place their
-own rows); else the time's share. Outside the estimate's span nothing is
+own rows), and the position follows the path's shape dead-reckoned between
+the two rows (Shares.path_ratio) where it is well conditioned; else the
+time's share on the arc. Outside the estimate's span nothing is
 extrapolated: those times are dropped.
 """
 from __future__ import annotations
@@ -80,14 +82,25 @@ def resampled(est: Estimate, times: np.ndarray, log=None) -> Estimate:
         w = (times - est.t[k]) / np.maximum(est.t[k1] - est.t[k], 1e-12)
     w = np.clip(w, 0.0, 1.0)
     lin = (1 - w)[:, None] * est.mean[k] + w[:, None] * est.mean[k1]
-    shares = None
+    shares = ratio = None
     if log is not None and len(est.t) > 1:
         from odomgraph.estimators.measurements import clean
         from odomgraph.estimators.shares import Shares
         sh = Shares(clean(log)[0])     # an encoder spike moved a 20 Hz row 2.4 cm (a second read)
         t0, t1 = est.t[k], est.t[k1]
         shares = (sh.travel(t0, t1, times), sh.gyro_turn(t0, t1, times, w))
-    pose = arc_poses(est.t[k], est.mean[k][:, S.POSE], est.t[k1], est.mean[k1][:, S.POSE], times, shares)
+        ratio = sh.path_ratio(t0, t1, times)
+    p0, p1 = est.mean[k][:, S.POSE], est.mean[k1][:, S.POSE]
+    pose = arc_poses(est.t[k], p0, est.t[k1], p1, times, shares)
+    if ratio is not None:
+        # The path's shape laid on the chord between the two rows, where it is
+        # well conditioned: an arc bends the whole way where a robot drove
+        # straight and then pivoted (estimators.shares.Shares.path_ratio).
+        ok = np.isfinite(ratio[:, 0])
+        r = ratio[ok, 0] + 1j * ratio[ok, 1]
+        c0 = p0[ok, 0] + 1j * p0[ok, 1]
+        at = c0 + r * (p1[ok, 0] + 1j * p1[ok, 1] - c0)
+        pose[ok, 0], pose[ok, 1] = at.real, at.imag
     lin[:, S.POSE] = pose
     sigma = (1 - w)[:, None] * est.sigma[k] + w[:, None] * est.sigma[k1]
     cov = None

@@ -60,11 +60,15 @@ HELD_PAD = 3.0
 ROW_GAP_MAX = 2.0
 
 
-def stretches(est) -> list[tuple[float, float, float, float]]:
+def stretches(est, chord=None) -> list[tuple[float, float, float, float]]:
     """(start [s], end [s], sideways move [m], in sigmas) of the windows of
     ``est`` (an Estimate: rows (N,) t, (N, 11) mean and sigma, state.NAMES
     order, world frame) in which the rows moved sideways, merged where they
-    overlap (the largest move kept); [] when none did."""
+    overlap (the largest move kept); [] when none did. ``chord``: (N-1,)
+    the angle [rad] of the wheels' path between rows from its mean heading
+    (estimators.shares.Shares.chord_angle; None: 0, an arc): a robot that
+    drove straight and then pivoted between two rows moved along its first
+    heading, not the mean."""
     t = np.asarray(est.t, float)
     if len(t) < 3:
         return []
@@ -72,6 +76,8 @@ def stretches(est) -> list[tuple[float, float, float, float]]:
     th = X[:, S.THETA]
     dx, dy = np.diff(X[:, S.X]), np.diff(X[:, S.Y])
     th_mid = th[:-1] + 0.5 * np.angle(np.exp(1j * np.diff(th)))
+    if chord is not None:
+        th_mid = th_mid + chord
     side = np.concatenate([[0.0], np.cumsum(-np.sin(th_mid) * dx + np.cos(th_mid) * dy)])
     path = np.concatenate([[0.0], np.cumsum(np.hypot(dx, dy))])
     gap = np.concatenate([[0], np.cumsum(np.diff(t) > ROW_GAP_MAX)])

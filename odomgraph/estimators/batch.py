@@ -553,7 +553,8 @@ def keyframe_rows(prob: Problem, pose: np.ndarray, W: np.ndarray, Sig: np.ndarra
                   rows: slice = slice(None)) -> Estimate:
     """States at interval midpoints: the pose flown from X_k along W_k's arc
     as far as the wheels got by then, turned as far as the gyro turned
-    (Keyframes.mid_tau_vw, motion.arc_at).
+    (Keyframes.mid_tau_vw, motion.arc_at), bent to the path's shape
+    (Keyframes.mid_bend).
 
     Row k describes interval k, so its velocity, slip and bias are the averages
     they are estimated as; sigma is propagated through the same arc.
@@ -562,7 +563,8 @@ def keyframe_rows(prob: Problem, pose: np.ndarray, W: np.ndarray, Sig: np.ndarra
     k = np.arange(kf.n - 1)[rows]
     t = kf.t[k] + 0.5 * kf.dt[k]
     tau = kf.mid_tau_vw[k]
-    p, Jf = arc_at(pose[k, 0], pose[k, 1], pose[k, 2], W[k, 0], W[k, 1], tau[:, 0], tau[:, 1])
+    p, Jf = arc_at(pose[k, 0], pose[k, 1], pose[k, 2], W[k, 0], W[k, 1], tau[:, 0], tau[:, 1],
+                   None if kf.mid_bend is None else kf.mid_bend[k])
     mean = np.empty((len(k), S.N))
     mean[:, 0:2] = p[:, 0:2]
     mean[:, 2] = wrap_angle(p[:, 2])

@@ -383,7 +383,7 @@ def linearize(prob: Problem, pose: np.ndarray, W: np.ndarray, k0: int = 0, k1: i
     if g1 > g0:
         k = kf.gps_k[g0:g1] - k0
         tvw = kf.gps_tau_vw[g0:g1]
-        p, Jf = arc_at(x[k], y[k], th[k], w[k, 0], w[k, 1], tvw[:, 0], tvw[:, 1])
+        p, Jf = arc_at(x[k], y[k], th[k], w[k, 0], w[k, 1], tvw[:, 0], tvw[:, 1], _rows(kf.gps_bend, g0, g1))
         h, Jh = gps_model.antenna_position(p[:, 0], p[:, 1], p[:, 2], r.gps_lever_arm)
         Jt = Jh @ Jf                                              # (G, 2, 5) world (x, y, theta, v, omega)
         inv = (1.0 / kf.gps_sigma[g0:g1])[:, None]
@@ -407,7 +407,7 @@ def linearize(prob: Problem, pose: np.ndarray, W: np.ndarray, k0: int = 0, k1: i
     if q1 > q0:
         k = kf.rng_k[q0:q1] - k0
         tvw = kf.rng_tau_vw[q0:q1]
-        p, Jf = arc_at(x[k], y[k], th[k], w[k, 0], w[k, 1], tvw[:, 0], tvw[:, 1])
+        p, Jf = arc_at(x[k], y[k], th[k], w[k, 0], w[k, 1], tvw[:, 0], tvw[:, 1], _rows(kf.rng_bend, q0, q1))
         bias = range_bias[kf.rng_id[q0:q1]] if nb else 0.0
         h, Jh = ranging.beacon_range(p[:, 0], p[:, 1], p[:, 2], kf.rng_beacon[q0:q1], r.range_lever_arm, bias)
         Jt = Jh[:, :, :3] @ Jf
@@ -436,7 +436,8 @@ def linearize(prob: Problem, pose: np.ndarray, W: np.ndarray, k0: int = 0, k1: i
 
     # --- motion: X_{k+1} against the arc of W_k's average velocity.
     nxt = pose[k0 + 1:k1 + 1]
-    e, J0, J1 = transition_residual(x, y, th, w[:, 0], w[:, 1], dt, nxt[:, 0], nxt[:, 1], nxt[:, 2])
+    e, J0, J1 = transition_residual(x, y, th, w[:, 0], w[:, 1], dt, nxt[:, 0], nxt[:, 1], nxt[:, 2],
+                                    _rows(kf.trans_bend, k0, k1))
     sm = prob.motion_whiten[k0:k1]
     b_m = -e * sm
     A_m0 = np.zeros((n1, 3, NB))
@@ -527,6 +528,11 @@ REJECTED_WEIGHT = 0.05
 DOWNWEIGHTED_WEIGHT = 0.5
 
 
+def _rows(a: np.ndarray | None, i0: int, i1: int) -> np.ndarray | None:
+    """a[i0:i1], or None (keyframes without bends: arcs)."""
+    return None if a is None else a[i0:i1]
+
+
 def measurement_weights(prob: Problem, pose: np.ndarray, W: np.ndarray) -> dict[str, np.ndarray]:
     """Robust weight (IRLS, 0..1) of each GPS fix and range at the estimate, at
     the loss's target threshold; {} without a robust loss. For counting what
@@ -538,13 +544,15 @@ def measurement_weights(prob: Problem, pose: np.ndarray, W: np.ndarray) -> dict[
     out = {}
     if kf.gps_k.size:
         j = kf.gps_k
-        p, _ = arc_at(pose[j, 0], pose[j, 1], pose[j, 2], W[j, 0], W[j, 1], kf.gps_tau_vw[:, 0], kf.gps_tau_vw[:, 1])
+        p, _ = arc_at(pose[j, 0], pose[j, 1], pose[j, 2], W[j, 0], W[j, 1], kf.gps_tau_vw[:, 0], kf.gps_tau_vw[:, 1],
+                      kf.gps_bend)
         h, _ = gps_model.antenna_position(p[:, 0], p[:, 1], p[:, 2], r.gps_lever_arm)
         u = np.hypot(*((h - kf.gps_xy) / kf.gps_sigma[:, None]).T)
         out["gps"] = robust_weight(u, prob.robust, k)[0] ** 2
     if kf.rng_k.size:
         j = kf.rng_k
-        p, _ = arc_at(pose[j, 0], pose[j, 1], pose[j, 2], W[j, 0], W[j, 1], kf.rng_tau_vw[:, 0], kf.rng_tau_vw[:, 1])
+        p, _ = arc_at(pose[j, 0], pose[j, 1], pose[j, 2], W[j, 0], W[j, 1], kf.rng_tau_vw[:, 0], kf.rng_tau_vw[:, 1],
+                      kf.rng_bend)
         h, _ = ranging.beacon_range(p[:, 0], p[:, 1], p[:, 2], kf.rng_beacon, r.range_lever_arm)
         u = (h[:, 0] - kf.rng_z) / r.range_sigma
         out["ranges"] = robust_weight(u, prob.robust, k)[0] ** 2

@@ -31,9 +31,10 @@ WINDOW_BACK = 3
 
 #: Keyframes fields by what they have one row of.
 _PER_KEYFRAME = ("t",)
-_PER_INTERVAL = ("enc_m", "enc_sigma", "gyro_z", "gyro_sigma", "gyro_n", "vel_z", "vel_sigma", "vel_n", "mid_tau_vw")
-_PER_FIX = ("gps_k", "gps_tau_vw", "gps_xy", "gps_sigma", "gps_t")
-_PER_RANGE = ("rng_k", "rng_tau_vw", "rng_beacon", "rng_z", "rng_id")
+_PER_INTERVAL = ("enc_m", "enc_sigma", "gyro_z", "gyro_sigma", "gyro_n", "vel_z", "vel_sigma", "vel_n", "mid_tau_vw", "trans_bend",
+                 "mid_bend")
+_PER_FIX = ("gps_k", "gps_tau_vw", "gps_xy", "gps_sigma", "gps_t", "gps_bend")
+_PER_RANGE = ("rng_k", "rng_tau_vw", "rng_beacon", "rng_z", "rng_id", "rng_bend")
 
 
 class _Buffers:
@@ -116,13 +117,13 @@ class GrowingProblem:
             b.append(name, getattr(piece, name)[w:w + 1])
         g = np.flatnonzero(piece.gps_k == w)
         b.append("gps_k", np.full(g.size, j))
-        for name in ("gps_tau_vw", "gps_xy", "gps_sigma"):
+        for name in ("gps_tau_vw", "gps_xy", "gps_sigma", "gps_bend"):
             b.append(name, getattr(piece, name)[g])
         b.append("gps_t", piece.gps_t[g] if piece.gps_t is not None else np.zeros(g.size))
         b.append("gps_slot", np.arange(g.size))
         r = np.flatnonzero(piece.rng_k == w)
         b.append("rng_k", np.full(r.size, j))
-        for name in ("rng_tau_vw", "rng_beacon", "rng_z", "rng_id"):
+        for name in ("rng_tau_vw", "rng_beacon", "rng_z", "rng_id", "rng_bend"):
             b.append(name, getattr(piece, name)[r])
         b.append("rng_slot", np.arange(r.size))
         p = self.problems[0]

@@ -39,7 +39,7 @@ from gtsam.symbol_shorthand import X as X_KEY
 from odomgraph.factors import gps as gps_model
 from odomgraph.factors import pose2, ranging
 from odomgraph.factors._math import wrap_angle
-from odomgraph.factors.motion import arc_at, propagate
+from odomgraph.factors.motion import arc_at, bend, propagate
 from odomgraph import state as St
 from odomgraph.checks import bounded
 from odomgraph.errors import EstimatorDivergedError
@@ -424,6 +424,7 @@ class _Runner:
         self.update_times = np.zeros(n)
         self.recoveries: list[str] = []
         self._recovered_at: list[float] = []
+        self._recovered_spans: list[tuple[int, int]] = []    # (j0, k) of each re-solve
         # The last keyframe: no segment hands over there. A stream does not know it until it ends.
         self.last_k = n - 1
 
@@ -456,7 +457,9 @@ class _Runner:
             ul, ur = kf.enc_m[k - 1, 0] / kl, kf.enc_m[k - 1, 1] / kr
             w[St.W_VEL] = 0.5 * (ul + ur), (ur - ul) / (kb * self.prob.robot.track_width)
             w[St.W_SLIP] = 0.0
-        p, _ = propagate(*self.pose[k - 1], self.W[k - 1, 0], self.W[k - 1, 1], kf.dt[k - 1])
+        x, y, th = self.pose[k - 1]
+        p, _ = bend(*propagate(x, y, th, self.W[k - 1, 0], self.W[k - 1, 1], kf.dt[k - 1]), x, y, th,
+                    None if kf.trans_bend is None else kf.trans_bend[k - 1])
         self.pose[k] = [p[0], p[1], wrap_angle(p[2])]
         self.W[k] = self.W[k - 1]
 
@@ -539,9 +542,41 @@ class _Runner:
         gi = sorted(i for s_, i in self.graph.held_rows if s_ == "gps")
         if gi and self.prob.kf.gps_t is not None:
             extra["held_out"] = {"gps": self.prob.kf.gps_t[gi]}
+        left = self._left_off()
+        if left:
+            extra["flags"] = list(extra.get("flags", ())) + left
+            extra["warnings"] = list(extra.get("warnings", ())) + left
         return smoother_estimate(self.prob, self.schedule, self.pose, self.W, Sig, self.method, wall0, notes,
                                  held=held, update_times=self.update_times[1:], recoveries=list(self.recoveries),
                                  heading_watch=self.heading_watch, **extra)
+
+    def _left_off(self) -> list[str]:
+        """A line for each re-solve whose stretch (its window and RECOVERY_AFTER
+        seconds on) the final estimate still leaves off its fixes or ranges:
+        RECOVERY_RUN of them in a row whose median post-fit distance exceeds
+        RECOVERY_LEFT sigma. A re-solve that did not bring the estimate back
+        is a wrong answer at a small sigma (a probe: fixed-lag's rows 0.55 m
+        off at z 50 after a re-solve inside a stuck-wheels slip, 35 s after
+        a 2 h pause, status ``recovered``). The fixes the first-linearisation
+        gate refused count: refused because the estimate was off, they are
+        the ones that show it."""
+        kf, out = self.prob.kf, []
+        n = len(self.pose)
+        for j0, k in self._recovered_spans:
+            k1 = min(int(np.searchsorted(kf.t, kf.t[min(k, n - 1)] + RECOVERY_AFTER)), n - 1)
+            g0, g1 = np.searchsorted(kf.gps_k, [j0, k1])
+            q0, q1 = np.searchsorted(kf.rng_k, [j0, k1])
+            worst = 0.0
+            for _, u2 in self._post_fit(np.arange(g0, g1), np.arange(q0, q1)):
+                if len(u2) >= RECOVERY_RUN:
+                    runs = np.lib.stride_tricks.sliding_window_view(u2, RECOVERY_RUN)
+                    worst = max(worst, float(np.sqrt(np.median(runs, axis=1).max())))
+            if worst > RECOVERY_LEFT:
+                out.append(f"{self.method}: the re-solve at t={kf.t[k]:.1f} s did not bring the estimate back: "
+                           f"between t={kf.t[j0]:.1f} and {kf.t[k1]:.1f} s its fixes or ranges sit up to "
+                           f"{worst:.0f} sigma from it ({RECOVERY_RUN} in a row, median); rows there are not "
+                           "trustworthy")
+        return out
 
     def _watch(self, j: int) -> str | None:
         """Divergence watch on interval j's GPS fixes and ranges, at the estimate just
@@ -589,8 +624,9 @@ class _Runner:
                 continue
             ks = (kf.gps_k if name == "GPS fixes" else kf.rng_k)[idx]
             tvw = (kf.gps_tau_vw if name == "GPS fixes" else kf.rng_tau_vw)[idx]
+            q = kf.gps_bend if name == "GPS fixes" else kf.rng_bend
             x, y, th = self.pose[ks].T
-            p, _ = arc_at(x, y, th, self.W[ks, 0], self.W[ks, 1], tvw[:, 0], tvw[:, 1])
+            p, _ = arc_at(x, y, th, self.W[ks, 0], self.W[ks, 1], tvw[:, 0], tvw[:, 1], None if q is None else q[idx])
             if name == "GPS fixes":
                 h, _ = gps_model.antenna_position(p[:, 0], p[:, 1], p[:, 2], r.gps_lever_arm)
                 checks.append((name, np.sum(((h - kf.gps_xy[idx]) / kf.gps_sigma[idx, None]) ** 2, 1)))
@@ -620,6 +656,7 @@ class _Runner:
         for e in self._ema.values():
             e[0], e[1], e[3] = float(e[2]), 0, []
         self._recovered_at.append(t)
+        self._recovered_spans.append((j0, k))
         self.recoveries.append(f"t={t:.2f} s: {reason}; re-solved the {t - kf.t[j0]:.0f} s since t={kf.t[j0]:.2f} s "
                                "and carried on from there")
 
@@ -645,6 +682,13 @@ REFRESH_BACK = 5.0
 #: many sigmas of the absolute sensor (plus twice the path so far) overshot (_overshot).
 OVERSHOOT = 2.0 * FIRST_GATE
 
+#: A re-solve's stretch runs this far past it [s] (_left_off)...
+RECOVERY_AFTER = 3.0
+#: ...and the final estimate still off its fixes there by more than this
+#: many sigmas (the median of RECOVERY_RUN in a row; one outlier cannot
+#: do it) is said (clean logs' post-fit distances sit near 1).
+RECOVERY_LEFT = 4.0
+RECOVERY_RUN = 5
 #: The fast watch trips when the recent post-fit residuals average this many
 #: times their expected whitened square (about 3.9 sigma per axis).
 FAST_WATCH = 15.0
@@ -684,6 +728,18 @@ def _block_local(vals, pose: np.ndarray, W: np.ndarray) -> np.ndarray:
     d[0:3] = gtsam.Pose2(*p0).localCoordinates(gtsam.Pose2(*pose))
     d[3:] = W - W0
     return d
+
+
+def _whitener(Lam: np.ndarray) -> np.ndarray:
+    """(n, n) A with A^T A = Lam, a symmetric information matrix, by its
+    eigenvectors. Directions it barely informs are floored, not dropped: a
+    variable left with no information at all stops a fresh ISAM2
+    (IndeterminateSystemException; measured: the slips after an hour's
+    pause in the log, whose random walk left them 1e-12 of the scale
+    factors' information). The floor is a prior far wider than the data."""
+    d, V = np.linalg.eigh(0.5 * (Lam + Lam.T))
+    d = np.maximum(d, 1e-9 * max(d.max(), 1e-300))
+    return np.sqrt(d)[:, None] * V.T
 
 
 class ISAM2Runner(_Runner):
@@ -788,7 +844,8 @@ class ISAM2Runner(_Runner):
         interval just completed (its averages are what the smoother knows)."""
         isam, kf = self.isam, self.prob.kf
         tau = kf.mid_tau_vw[k - 1]          # as far as the wheels got by the midpoint (batch.keyframe_rows)
-        p, Jf = arc_at(*self.pose[k - 1], self.W[k - 1, 0], self.W[k - 1, 1], tau[0], tau[1])
+        p, Jf = arc_at(*self.pose[k - 1], self.W[k - 1, 0], self.W[k - 1, 1], tau[0], tau[1],
+                       None if kf.mid_bend is None else kf.mid_bend[k - 1])
         row = np.empty(St.N)
         row[0:2], row[2] = p[0:2], wrap_angle(p[2])
         row[3:] = self.W[k - 1]
@@ -818,7 +875,11 @@ class ISAM2Runner(_Runner):
         cov_block = seg["cov"]
         cov = cov_block[np.ix_(_PERM, _PERM)]              # back to ISAM2 order X, W, S
         p0, w0 = _block_values(seg["vals"])
-        L = np.linalg.cholesky(np.linalg.inv(cov_block)).T
+        # A whitener with L^T L = the information, floored as
+        # _information_factor's: a Cholesky factor failed on a hand-over
+        # across a 2 h pause of a wheel-speed log (not positive definite to
+        # rounding; tests/test_pauses.py).
+        L = _whitener(np.linalg.inv(cov_block))
         return (self._information_factor(seg["vals"], np.linalg.inv(cov), np.zeros(11)), gtsam.Values(seg["vals"]),
                 (p0, w0, L))
 
@@ -885,15 +946,8 @@ class ISAM2Runner(_Runner):
         """LinearContainerFactor of 0.5 d^T Lam d - eta^T d on (X_b, W_b, S_b) at ``vals``."""
         keys = list(vals.keys())
         keys = [k for c in ("x", "w", "s") for k in keys if chr(gtsam.Symbol(k).chr()) == c]
-        d, V = np.linalg.eigh(0.5 * (Lam + Lam.T))
-        # Directions the marginal barely informs are floored, not dropped: a
-        # variable left with no information at all stops the fresh ISAM2
-        # (IndeterminateSystemException; measured: the slips after an hour's
-        # pause in the log, whose random walk left them 1e-12 of the scale
-        # factors' information). The floor is a prior far wider than the data.
-        d = np.maximum(d, 1e-9 * max(d.max(), 1e-300))
-        A = np.sqrt(d)[:, None] * V.T
-        b = (V.T @ eta) / np.sqrt(d)
+        A = _whitener(Lam)
+        b = np.linalg.solve(A.T, eta)
         jf = gtsam.JacobianFactor(keys[0], A[:, 0:3], keys[1], A[:, 3:9], keys[2], A[:, 9:11], b,
                                   gtsam.noiseModel.Unit.Create(len(b)))
         g = gtsam.NonlinearFactorGraph()
@@ -952,7 +1006,7 @@ class ISAM2Runner(_Runner):
         b_t = (V[:, keep].T @ eta_later) / np.sqrt(ev[keep])
         if k0 > 0:
             prev = self.segments[i - 1]
-            L0 = np.linalg.cholesky(np.linalg.inv(prev["cov"])).T
+            L0 = _whitener(np.linalg.inv(prev["cov"]))
 
         def build(pose, W):
             lin = linearize(self.prob, pose, W, k0, b)
@@ -1111,7 +1165,11 @@ class FixedLagRunner(_Runner):
         vals.insert(S_KEY(j0), est.atVector(S_KEY(j0)))
         p0, w0 = _block_values(vals)
         cov_block = _to_block(cov)
-        L = np.linalg.cholesky(np.linalg.inv(cov_block)).T
+        # A whitener with L^T L = the information, floored as
+        # _information_factor's: a Cholesky factor failed on a hand-over
+        # across a 2 h pause of a wheel-speed log (not positive definite to
+        # rounding; tests/test_pauses.py).
+        L = _whitener(np.linalg.inv(cov_block))
         pose, W, _ = solve_window(self.prob, self.pose, self.W, j0, k, (p0, w0, L))
         self.pose[j0:k + 1], self.W[j0:k + 1] = pose[j0:k + 1], W[j0:k + 1]
         graph = ISAM2Runner._information_factor(vals, np.linalg.inv(cov), np.zeros(11))

@@ -76,6 +76,14 @@ class Keyframes:
     midpoint, its row's time (batch.keyframe_rows) [s]: tau_v as
     gps_tau_vw's (the wheels' travel), tau_omega the gyro's share of the
     interval's turn (estimators.shares; half the interval without one)."""
+    trans_bend: np.ndarray | None = None
+    """(N-1, 4) each interval's path against its arc: a complex factor on
+    the transition's chord and an offset (shares.Shares.bend,
+    factors.motion.bend); mid_bend, gps_bend (G, 4), rng_bend (R, 4):
+    likewise at the rows', fixes' and ranges' places. None: arcs."""
+    mid_bend: np.ndarray | None = None
+    gps_bend: np.ndarray | None = None
+    rng_bend: np.ndarray | None = None
     gps_t: np.ndarray | None = None
     """(G,) time of each fix [s]."""
 
@@ -330,7 +338,15 @@ def build_keyframes(log: Log, t_start: float, keyframe_hz: float, causal: bool =
     # run 3x faster): the gyro's share, or half without a gyro's turn.
     sh = Shares(log)
     t0, t1, tm = t[:-1], t[1:], t[:-1] + 0.5 * np.diff(t)
-    mid_tau = np.stack([sh.travel(t0, t1, tm), sh.gyro_turn(t0, t1, tm, 0.5)], -1) * np.diff(t)[:, None]
+    mid_share = np.stack([sh.travel(t0, t1, tm), sh.gyro_turn(t0, t1, tm, 0.5)], -1)
+    mid_tau = mid_share * np.diff(t)[:, None]
+    mid_bend = sh.bend(t0, t1, tm, mid_share[:, 0], mid_share[:, 1])
+    trans_bend = sh.bend(t0, t1, t1, np.ones(nint), np.ones(nint))
+
+    def bent(k, ts, tvw):
+        """(len, 2) the bend at times ts in intervals k placed by tvw (effective)."""
+        dt = t[k + 1] - t[k]
+        return sh.bend(t[k], t[k + 1], ts, tvw[:, 0] / dt, tvw[:, 1] / dt)
 
     def effective(k, ts):
         """(len, 2) effective (tau_v, tau_omega) [s] of times ts in intervals
@@ -349,24 +365,29 @@ def build_keyframes(log: Log, t_start: float, keyframe_hz: float, causal: bool =
     empty2 = np.zeros((0, 2))
     gk = gs = gt = np.zeros(0)
     gxy = gvw = empty2
+    gb = np.zeros((0, 4))
     if log.gps is not None and len(log.gps.t):
         g = log.gps
         k, inside = bin_times(t, g.t)
         gk = k[inside]
         gvw = effective(gk, g.t[inside])
+        gb = bent(gk, g.t[inside], gvw)
         gxy = np.stack([g.x, g.y], -1)[inside]
         gs = (g.sigma if g.sigma is not None else np.full(len(g.t), r.gps_sigma))[inside]
         gt = g.t[inside]
     rk = rz = rid = np.zeros(0)
     rb = rvw = empty2
+    rbd = np.zeros((0, 4))
     if log.ranges is not None and len(log.ranges.t):
         rg = log.ranges
         k, inside = bin_times(t, rg.t)
         rk, rz = k[inside], rg.range[inside]
         rvw = effective(rk, rg.t[inside])
+        rbd = bent(rk, rg.t[inside], rvw)
         rb = np.asarray([[bc.x, bc.y] for bc in r.beacons])[rg.beacon[inside]]
         rid = rg.beacon[inside]
     return Keyframes(t=t, enc_m=m, enc_sigma=sigma, gyro_z=gyro_z, gyro_sigma=gyro_sd, gyro_n=np.asarray(gyro_n),
                      vel_z=vel_z, vel_sigma=vel_sd, vel_n=np.asarray(vel_n), gps_k=gk.astype(int), gps_tau_vw=gvw,
                      gps_xy=gxy, gps_sigma=gs, gps_t=gt, rng_k=rk.astype(int), rng_tau_vw=rvw, rng_beacon=rb, rng_z=rz,
-                     rng_id=np.asarray(rid, int), mid_tau_vw=mid_tau)
+                     rng_id=np.asarray(rid, int), mid_tau_vw=mid_tau,
+                     trans_bend=trans_bend, mid_bend=mid_bend, gps_bend=gb, rng_bend=rbd)

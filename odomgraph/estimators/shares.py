@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from odomgraph.estimators.measurements import PAUSE_S
 from odomgraph.io.log import Log
 
 #: The gyro's turn inside an interval is taken as a turn beyond this many
@@ -31,6 +32,11 @@ def share(c0, c1, ct, eps, fallback) -> np.ndarray:
     total = np.asarray(c1, float) - c0
     moving = np.abs(total) > eps
     return np.where(moving, np.clip((ct - c0) / np.where(moving, total, 1.0), 0.0, 1.0), fallback)
+
+
+def _interp(x, xp, fp) -> np.ndarray:
+    """np.interp of a complex series."""
+    return np.interp(x, xp, fp.real) + 1j * np.interp(x, xp, fp.imag)
 
 
 class Shares:
@@ -55,11 +61,16 @@ class Shares:
             w = log.wheel_speeds
             ms = np.stack([w.v_left, w.v_right], -1)
             self.t = w.t
-            # the trapezoid rule between speed samples
-            self.wheels = np.concatenate([np.zeros((1, 2)),
-                                          np.cumsum(0.5 * (ms[1:] + ms[:-1]) * np.diff(w.t)[:, None], 0)])
+            # the trapezoid rule between speed samples; none across a pause
+            # (a sample is an instant: the speed before a day's pause said
+            # nothing of it, and put a row in one 35 m away)
+            dt = np.diff(w.t)
+            step = np.where((dt > PAUSE_S)[:, None], 0.0, 0.5 * (ms[1:] + ms[:-1]) * dt[:, None])
+            self.wheels = np.concatenate([np.zeros((1, 2)), np.cumsum(step, 0)])
         self.fwd = self.wheels.mean(1)
         self.diff = self.wheels[:, 1] - self.wheels[:, 0]
+        self.track = r.track_width
+        self._paths = None
         # More than two ticks [m]. The quarter tick keeps tick counts off the
         # threshold: forward travel is a mean of two wheels' whole ticks, so it
         # moves in half ticks, and at exactly a count on that grid rounding in
@@ -69,7 +80,9 @@ class Shares:
         g = log.gyro
         self.gyro = g if g is not None and len(g.t) > 1 else None
         if self.gyro is not None:
-            self.gcum = np.concatenate([[0.0], np.cumsum(0.5 * (g.omega[1:] + g.omega[:-1]) * np.diff(g.t))])
+            dt = np.diff(g.t)
+            # likewise no turn across a pause of the gyro
+            self.gcum = np.concatenate([[0.0], np.cumsum(np.where(dt > PAUSE_S, 0.0, 0.5 * (g.omega[1:] + g.omega[:-1]) * dt))])
         self.gyro_sigma = r.gyro_sigma
 
     def _wheels(self, c, t0, t1, ts):
@@ -92,9 +105,112 @@ class Shares:
         # from the log's extent differed between a stream's windows and the
         # whole log, and a standing robot's bias-sized turns fell on either
         # side of the threshold (tests/test_heading.py's stream and replay).
-        n = np.searchsorted(gt, t1, side="right") - np.searchsorted(gt, t0, side="left")
+        n = self._gyro_n(t0, t1)
         eps = np.where(n >= 2, GYRO_Z * self.gyro_sigma * (t1 - t0) / np.sqrt(np.maximum(n, 1)), np.inf)
         return share(self._turned(t0, t1), self._turned(t1, t1), self._turned(ts, t1), eps, fallback)
+
+    def _gyro_n(self, t0, t1) -> np.ndarray:
+        """(len,) gyro samples inside [t0, t1]."""
+        gt = self.gyro.t
+        return np.searchsorted(gt, t1, side="right") - np.searchsorted(gt, t0, side="left")
+
+    def bend(self, t0, t1, ts, s_v, s_w) -> np.ndarray:
+        """(len, 4) how the path from t0 to ts differs from the arc that
+        places ts (factors.motion.bend): (re, im) of a complex factor q on
+        the arc's displacement, then (re, im) of an offset o [m] in the
+        body frame at t0. The path is dead-reckoned from the wheels' travel,
+        turned by the gyro's integral (by the wheels' difference over the
+        nominal track where [t0, t1] holds fewer than two gyro samples); the
+        arc is the interval's travel and turn at the shares (s_v, s_w) the
+        caller places ts by (arrays (len,); 1, 1 at t1), both from the
+        nominal calibration. Where the arc's displacement is well
+        conditioned, q = path / arc and o = 0: the path's shape, which the
+        estimated calibration scales as it scales the arc. Elsewhere (a
+        displacement under two ticks, a reversal or a loop: the path
+        runs more than twice its displacement, or q outside [1/2, 2]), q = 1
+        and o = path - arc: the path as the nominal calibration flew it,
+        corrected by the arc's change.
+
+        Why: an arc of the interval's average curvature bends the whole
+        distance, where a robot that drove straight and then pivoted went
+        straight (a probe's paper log 3x faster at 2 Hz keyframes: keyframes
+        0.31 m off, z 14, status ok); and a robot that reversed inside an
+        interval is not at its start at the interval's middle."""
+        t0, t1, ts, s_v, s_w = (np.asarray(a, float) for a in (t0, t1, ts, s_v, s_w))
+        P, H, _ = self._path(t0, t1)
+        h0 = H(t0)
+        D = np.exp(-1j * h0) * (P(ts) - P(t0))
+        travel = np.interp(t1, self.t, self.fwd) - np.interp(t0, self.t, self.fwd)
+        half = 0.5 * s_w * (H(t1) - h0)
+        A = s_v * travel * np.sinc(half / np.pi) * np.exp(1j * half)
+        length = self._paths[2]
+        along = np.abs(np.interp(ts, self.t, length) - np.interp(t0, self.t, length))
+        q = D / np.where(np.abs(A) > self.eps, A, 1.0)
+        ok = (np.abs(A) > self.eps) & (along <= 2.0 * np.abs(D)) & (np.abs(q) >= 0.5) & (np.abs(q) <= 2.0)
+        q = np.where(ok, q, 1.0)
+        o = np.where(ok, 0.0, D - A)
+        return np.stack([q.real, q.imag, o.real, o.imag], -1)
+
+    def path_ratio(self, t0, t1, ts) -> np.ndarray:
+        """(len, 2) where the path inside [t0, t1] had got to by ts, as the
+        complex ratio (re, im) of its displacement since t0 to the whole
+        interval's: a point between two known poses p0, p1 (complex
+        positions) is p0 + r (p1 - p0), the path's shape laid on their
+        chord (analysis.resample). NaN where the interval's displacement is
+        under two ticks or the path runs more than twice as far."""
+        t0, t1, ts = (np.asarray(a, float) for a in (t0, t1, ts))
+        P, _, ok = self._path(t0, t1)
+        p0 = P(t0)
+        chord = P(t1) - p0
+        r = (P(ts) - p0) / np.where(ok, chord, 1.0)
+        return np.where(ok[:, None], np.stack([r.real, r.imag], -1), np.nan)
+
+    def _path(self, t0, t1):
+        """(P, H, ok): the dead-reckoned positions P(times) (complex) and
+        headings H(times) [rad] of each interval's source (the gyro where
+        [t0, t1] holds two samples or more, else the wheels), and whether the
+        interval's displacement is well conditioned (over two ticks, and at
+        least half the path's length)."""
+        if self._paths is None:
+            self._paths = self._dead_reckoned()
+        Pa, Ha, length = self._paths
+        j = (self._gyro_n(t0, t1) >= 2) if self.gyro is not None else np.zeros(np.shape(t0), bool)
+        P = lambda x: np.where(j, _interp(x, self.t, Pa[:, 1]), _interp(x, self.t, Pa[:, 0]))
+        H = lambda x: np.where(j, np.interp(x, self.t, Ha[:, 1]), np.interp(x, self.t, Ha[:, 0]))
+        D = np.abs(P(t1) - P(t0))
+        along = np.abs(np.interp(t1, self.t, length) - np.interp(t0, self.t, length))
+        return P, H, (D > self.eps) & (along <= 2.0 * D)
+
+    def chord_angle(self, t0, t1) -> np.ndarray:
+        """(len,) the angle [rad] of the path's displacement over [t0, t1]
+        from its mean heading there: 0 on an arc; a robot that drove
+        straight and then turned by T went along its first heading, T/2 off
+        the mean (analysis.sideways, whose rows a second apart otherwise
+        moved a robot sideways: 0.19 m, z 13, on a clean log). 0 where the
+        displacement is under two ticks, or the path runs more than twice
+        as far (a reversal or a loop)."""
+        t0, t1 = np.asarray(t0, float), np.asarray(t1, float)
+        P, H, ok = self._path(t0, t1)
+        D = P(t1) - P(t0)
+        return np.where(ok, np.angle(D * np.exp(-0.5j * (H(t0) + H(t1)))), 0.0)
+
+    def _dead_reckoned(self):
+        """((M, 2) complex positions and (M, 2) headings [rad] at the wheel
+        rows, column 0 from the wheels' difference, column 1 from the gyro
+        (the wheels' where there is no gyro); (M,) cumulative path length
+        [m]). Each step an arc between its ends' headings; the gyro's
+        heading at a row reads no sample after it (a stream's equals the
+        log's: the origin's position and heading cancel in ``bend``)."""
+        ds = np.diff(self.fwd)
+        H = np.zeros((len(self.t), 2))
+        H[:, 0] = self.diff / self.track
+        H[:, 1] = self._turned(self.t, self.t) if self.gyro is not None else H[:, 0]
+        P = np.zeros((len(self.t), 2), complex)
+        for j in range(2):
+            # each step an arc: its chord is sinc(turn / 2) of its length
+            dh = np.diff(H[:, j])
+            P[1:, j] = np.cumsum(ds * np.sinc(0.5 * dh / np.pi) * np.exp(0.5j * (H[1:, j] + H[:-1, j])))
+        return P, H, np.concatenate([[0.0], np.cumsum(np.abs(ds))])
 
     def _turned(self, ts, t_end) -> np.ndarray:
         """(len,) the gyro's turn [rad] from its first sample to times ts:
@@ -113,6 +229,6 @@ class Shares:
         h = gt[j1] - gt[j]
         u = ts - gt[j]
         slope = np.where(h > 0, (gw[j1] - gw[j]) / np.where(h > 0, h, 1.0), 0.0)
-        between = self.gcum[j] + gw[j] * u + 0.5 * slope * u**2
+        between = np.where(h > PAUSE_S, self.gcum[j], self.gcum[j] + gw[j] * u + 0.5 * slope * u**2)
         held = self.gcum[jend] + gw[jend] * (ts - gt[jend])
         return np.where(inner, between, np.where(ts < gt[0], gw[0] * (ts - gt[0]), held))
