@@ -523,7 +523,7 @@ def _with_noise_scales(est: Estimate, log: Log, method: Method, schedule: Schedu
     again (at most twice): every sigma of the estimate inherits them
     (analysis.noise). The scales found and applied go into the result."""
     from odomgraph.analysis.noise import (NARROW_BELOW, NARROW_MIN_COUNT, WIDEN_ABOVE, correlation_factors, floored,
-                                          gps_sigma_floor, measured_from, noise_scales, widened)
+                                          gps_sigma_floor, measured_count, measured_from, noise_scales, widened)
     applied: dict[str, float] = {}
     cur = log
     floor_note = []
@@ -606,10 +606,11 @@ def _with_noise_scales(est: Estimate, log: Log, method: Method, schedule: Schedu
         # an estimate that follows them (AR(1) errors at a right sigma
         # measured 0.09-0.27, and those estimates were over-confident, a
         # second read). Nor from few measurements (NARROW_MIN_COUNT).
-        count = _count(first, cur, k)
         v = v * corr.get(k, (0.0, 1.0))[1]
-        if (v >= NARROW_BELOW or k in applied or source[k] == "predictions" or count < NARROW_MIN_COUNT
-                or (k == "gps" and fl is not None)):
+        if v >= NARROW_BELOW or k in applied or source[k] == "predictions" or (k == "gps" and fl is not None):
+            continue
+        count = measured_count(first, cur, k)
+        if count < NARROW_MIN_COUNT:
             continue
         own = k == "gps" and per_fix
         conf = (f"the fixes' own sigmas (median {float(np.median(log.gps.sigma)):.3g} m)" if own else
@@ -628,15 +629,6 @@ def _with_noise_scales(est: Estimate, log: Log, method: Method, schedule: Schedu
                 f"{1 / max(v, 1e-9):.2g}x too large, so this estimate's sigmas are pessimistic and the {what} count "
                 f"for less than they should; not changed (set {'the sigma in gps.csv' if own else 'it in robot.toml'})")
     return est
-
-
-def _count(est: Estimate, log: Log, sensor: str) -> int:
-    """How many measurements a noise scale came from (analysis.noise.noise_scales)."""
-    inn = est.innovations.get(sensor)
-    if inn is not None and inn.nis.size:
-        return int(inn.nis.size)
-    src = log.gps if sensor == "gps" else log.ranges
-    return len(src.t) if src is not None else 0
 
 
 def _with_time_offset(log: Log, method: Method, schedule: Schedule, progress, options: dict) -> Estimate:

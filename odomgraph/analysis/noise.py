@@ -42,9 +42,10 @@ CHI2_MEDIAN = {1: 0.4549, 2: 1.3863}
 WIDEN_ABOVE = 1.3
 #: Fewest measurements a scale is estimated from.
 MIN_COUNT = 20
-#: A scale this far below 1, from NARROW_MIN_COUNT measurements or more and
-#: with no persistence credited (correlation_factors), says the configured
-#: sigma (or a filter's process noise) is too large: said, not acted on.
+#: A scale this far below 1, from NARROW_MIN_COUNT measurements or more
+#: (measured_count), with persistence credited as the widening credits it
+#: (correlation_factors), says the configured sigma (or a filter's process
+#: noise) is too large: said, not acted on.
 #: Right sigmas measured 0.71-1.0 from 150-1200 fixes (paper and yard
 #: scenarios, fixes at 0.5-10 Hz, EKF innovations and smoother residuals
 #: alike), but 0.52-0.69 from 25-30 (a second read); 3x too large measured
@@ -69,6 +70,18 @@ def noise_scales(est, log) -> dict[str, float]:
         if u is not None and u.size >= MIN_COUNT:
             out[sensor] = float(1.4826 * np.median(np.abs(u)))
     return out
+
+
+def measured_count(est, log, sensor: str) -> int:
+    """How many measurements noise_scales measured ``sensor``'s scale from:
+    a filter's innovations, or the residuals of the cleaned log's fixes or
+    ranges inside the estimate's span (not the log's rows)."""
+    inn = est.innovations.get(sensor)
+    if inn is not None and inn.nis.size >= MIN_COUNT:
+        return int(inn.nis.size)
+    from odomgraph.estimators.measurements import clean
+    u = _whitened_residuals(est, clean(log)[0], sensor)
+    return 0 if u is None else int(u.size)
 
 
 def measured_from(est, sensor: str) -> str:
