@@ -116,7 +116,8 @@ def bend(pose, J, x, y, theta, q):
         pose: (..., 3) from propagate or arc_at; J: (..., 3, 5) its Jacobian.
         x, y, theta: (...) the start pose [m, rad].
         q: (..., 4) (re, im) of the factor, (re, im) of the offset [m, body
-            frame at the start]; or None.
+            frame at the start]; or (..., 5) with an offset of the heading
+            [rad]; or None.
 
     Returns:
         pose, J: bent (new arrays); the inputs when q is None.
@@ -137,6 +138,8 @@ def bend(pose, J, x, y, theta, q):
     J[..., 1, 2:] = b[..., None] * jx + a[..., None] * jy
     J[..., 0, 2] += -s * ox - c * oy
     J[..., 1, 2] += c * ox - s * oy
+    if q.shape[-1] > 4:
+        pose[..., 2] += q[..., 4]
     return pose, J
 
 
@@ -155,7 +158,7 @@ def arc_at(x, y, theta, v, omega, tau_v, tau_omega, q=None):
         x, y, theta: (...) pose at the start of the interval, world frame [m, rad].
         v, omega: (...) interval-average forward speed [m/s] and yaw rate [rad/s].
         tau_v, tau_omega: (...) effective times [s].
-        q: (..., 4) the path's bend (``bend``), or None: the arc.
+        q: (..., 4|5) the path's bend (``bend``), or None: the arc.
 
     Returns:
         pose: (..., 3); J: (..., 3, 5) d pose / d (x, y, theta, v, omega).
@@ -174,7 +177,7 @@ def transition_residual(x, y, theta, v, omega, dt, x1, y1, theta1, q=None):
     e = [R(theta_p)^T (p1 - p_p), wrap(theta1 - theta_p)] with (p_p, theta_p) =
     propagate(x, y, theta, v, omega, dt): the along-track, lateral [m] and
     heading [rad] disagreement of pose 1 with the arc flown from pose 0,
-    its chord bent by q ((..., 4), ``bend``; None: the arc).
+    its chord bent by q ((..., 4|5), ``bend``; None: the arc).
 
     Returns:
         e: (..., 3).

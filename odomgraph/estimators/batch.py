@@ -150,7 +150,18 @@ def initial_guess(prob: Problem, ekf: Estimate) -> tuple[np.ndarray, np.ndarray]
     # speed diverges as the turn nears it.
     th_u = np.interp(t, ekf.t, np.unwrap(m[:, S.THETA]))
     ok = np.abs(np.diff(th_u)) < MAX_GUESS_TURN
-    v, om = velocity_between(pose[:-1, 0], pose[:-1, 1], pose[:-1, 2], pose[1:, 0], pose[1:, 1], pose[1:, 2],
+    # The motion model bends the arc's chord to the path's shape
+    # (Keyframes.trans_bend): the arc whose bent chord meets the next pose
+    # is the one whose plain chord meets it unbent.
+    nxt = pose[1:, 0:2]
+    q = prob.kf.trans_bend
+    if q is not None:
+        c0 = pose[:-1, 0] + 1j * pose[:-1, 1]
+        rot = np.exp(1j * pose[:-1, 2])
+        body = (nxt[:, 0] + 1j * nxt[:, 1] - c0) / rot - (q[:, 2] + 1j * q[:, 3])
+        plain = c0 + rot * body / (q[:, 0] + 1j * q[:, 1])
+        nxt = np.column_stack([plain.real, plain.imag])
+    v, om = velocity_between(pose[:-1, 0], pose[:-1, 1], pose[:-1, 2], nxt[:, 0], nxt[:, 1], pose[1:, 2],
                              prob.kf.dt)
     W[:-1, 0] = np.where(ok, v, W[:-1, 0])
     W[:-1, 1] = np.where(ok, om, W[:-1, 1])

@@ -7,7 +7,8 @@ tangent) and W_k (8 averages). Their 11-dim tangent block is ordered like
 Factors, all built on the models in ``factors/`` (the EKF's models):
 
 * motion (X_k, W_k, X_{k+1}): X_{k+1} against the arc flown with W_k's average
-  velocity (factors.motion.transition_residual);
+  velocity, its chord bent to the path dead-reckoned inside the interval
+  (factors.motion.transition_residual, Keyframes.trans_bend);
 * random walk (W_k, W_{k+1}): of v, omega (white acceleration), gyro bias,
   common-mode and differential slip (as in the EKF) and the scale factors (a
   floor of 1e-5/sqrt(s) keeps the chain free of global variables). With a
@@ -15,7 +16,8 @@ Factors, all built on the models in ``factors/`` (the EKF's models):
   wheel-speed units (Problem.wheel_speed_units);
 * unary on (X_k, W_k): encoder (eq. 29), gyro (eq. 10), velocity sensor,
   GPS (eq. 8) and range (eq. 12) part-way along the arc (motion.arc_at, at the
-  share of the interval's wheel travel done by their time), and the
+  share of the interval's wheel travel done by their time, bent likewise:
+  Keyframes.gps_bend, rng_bend), and the
   schedule's zero-slip prior (eq. 35);
 * a prior on keyframe 0 from the initialisation.
 

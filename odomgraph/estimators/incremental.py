@@ -558,16 +558,28 @@ class _Runner:
         is a wrong answer at a small sigma (a probe: fixed-lag's rows 0.55 m
         off at z 50 after a re-solve inside a stuck-wheels slip, 35 s after
         a 2 h pause, status ``recovered``). The fixes the first-linearisation
-        gate refused count: refused because the estimate was off, they are
-        the ones that show it."""
+        gate or the robust loss refused count: refused because the estimate
+        was off, they are the ones that show it; those held out as a jump
+        (graph.held_rows, a burst no estimate follows) do not."""
         kf, out = self.prob.kf, []
         n = len(self.pose)
+        held = set(self.graph.held_rows)
         for j0, k in self._recovered_spans:
-            k1 = min(int(np.searchsorted(kf.t, kf.t[min(k, n - 1)] + RECOVERY_AFTER)), n - 1)
+            k = min(k, n - 1)
+            # RECOVERY_AFTER s past the re-solve, and at least RECOVERY_RUN
+            # fixes or ranges past it (1 Hz fixes: 3 s hold too few)
+            g_k, q_k = np.searchsorted(kf.gps_k, k), np.searchsorted(kf.rng_k, k)
+            ends = [kf.t[k] + RECOVERY_AFTER]
+            for ks, i in ((kf.gps_k, g_k), (kf.rng_k, q_k)):
+                if i + RECOVERY_RUN - 1 < len(ks):
+                    ends.append(kf.t[min(ks[i + RECOVERY_RUN - 1] + 1, n - 1)])
+            k1 = min(int(np.searchsorted(kf.t, max(ends))), n - 1)
             g0, g1 = np.searchsorted(kf.gps_k, [j0, k1])
             q0, q1 = np.searchsorted(kf.rng_k, [j0, k1])
+            gi = np.array([i for i in range(g0, g1) if ("gps", i) not in held], int)
+            qi = np.array([i for i in range(q0, q1) if ("ranges", i) not in held], int)
             worst = 0.0
-            for _, u2 in self._post_fit(np.arange(g0, g1), np.arange(q0, q1)):
+            for _, u2 in self._post_fit(gi, qi):
                 if len(u2) >= RECOVERY_RUN:
                     runs = np.lib.stride_tricks.sliding_window_view(u2, RECOVERY_RUN)
                     worst = max(worst, float(np.sqrt(np.median(runs, axis=1).max())))
@@ -738,8 +750,25 @@ def _whitener(Lam: np.ndarray) -> np.ndarray:
     pause in the log, whose random walk left them 1e-12 of the scale
     factors' information). The floor is a prior far wider than the data."""
     d, V = np.linalg.eigh(0.5 * (Lam + Lam.T))
+    return _floored(d, V)
+
+
+def _floored(d: np.ndarray, V: np.ndarray) -> np.ndarray:
     d = np.maximum(d, 1e-9 * max(d.max(), 1e-300))
     return np.sqrt(d)[:, None] * V.T
+
+
+def _cov_whitener(cov: np.ndarray) -> np.ndarray:
+    """(n, n) L with L^T L = cov^-1 (a hand-over marginal's whitener), from
+    the covariance's eigenvectors, its eigenvalues kept positive and its
+    information floored as _whitener's. A Cholesky factor of the inverse
+    failed on a hand-over across a 2 h pause of a wheel-speed log (not
+    positive definite to rounding; tests/test_pauses.py); the inverse's
+    eigenvalues, floored, would turn a covariance eigenvalue rounded below
+    zero into the least informed direction (a second read)."""
+    w, V = np.linalg.eigh(0.5 * (cov + cov.T))
+    w = np.maximum(w, 1e-15 * max(w.max(), 1e-300))
+    return _floored(1.0 / w, V)
 
 
 class ISAM2Runner(_Runner):
@@ -875,11 +904,7 @@ class ISAM2Runner(_Runner):
         cov_block = seg["cov"]
         cov = cov_block[np.ix_(_PERM, _PERM)]              # back to ISAM2 order X, W, S
         p0, w0 = _block_values(seg["vals"])
-        # A whitener with L^T L = the information, floored as
-        # _information_factor's: a Cholesky factor failed on a hand-over
-        # across a 2 h pause of a wheel-speed log (not positive definite to
-        # rounding; tests/test_pauses.py).
-        L = _whitener(np.linalg.inv(cov_block))
+        L = _cov_whitener(cov_block)
         return (self._information_factor(seg["vals"], np.linalg.inv(cov), np.zeros(11)), gtsam.Values(seg["vals"]),
                 (p0, w0, L))
 
@@ -1006,7 +1031,7 @@ class ISAM2Runner(_Runner):
         b_t = (V[:, keep].T @ eta_later) / np.sqrt(ev[keep])
         if k0 > 0:
             prev = self.segments[i - 1]
-            L0 = _whitener(np.linalg.inv(prev["cov"]))
+            L0 = _cov_whitener(prev["cov"])
 
         def build(pose, W):
             lin = linearize(self.prob, pose, W, k0, b)
@@ -1165,11 +1190,7 @@ class FixedLagRunner(_Runner):
         vals.insert(S_KEY(j0), est.atVector(S_KEY(j0)))
         p0, w0 = _block_values(vals)
         cov_block = _to_block(cov)
-        # A whitener with L^T L = the information, floored as
-        # _information_factor's: a Cholesky factor failed on a hand-over
-        # across a 2 h pause of a wheel-speed log (not positive definite to
-        # rounding; tests/test_pauses.py).
-        L = _whitener(np.linalg.inv(cov_block))
+        L = _cov_whitener(cov_block)
         pose, W, _ = solve_window(self.prob, self.pose, self.W, j0, k, (p0, w0, L))
         self.pose[j0:k + 1], self.W[j0:k + 1] = pose[j0:k + 1], W[j0:k + 1]
         graph = ISAM2Runner._information_factor(vals, np.linalg.inv(cov), np.zeros(11))

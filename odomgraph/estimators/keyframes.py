@@ -77,10 +77,11 @@ class Keyframes:
     gps_tau_vw's (the wheels' travel), tau_omega the gyro's share of the
     interval's turn (estimators.shares; half the interval without one)."""
     trans_bend: np.ndarray | None = None
-    """(N-1, 4) each interval's path against its arc: a complex factor on
-    the transition's chord and an offset (shares.Shares.bend,
-    factors.motion.bend); mid_bend, gps_bend (G, 4), rng_bend (R, 4):
-    likewise at the rows', fixes' and ranges' places. None: arcs."""
+    """(N-1, 5) each interval's path against its arc: a complex factor on
+    the transition's chord, an offset, and a heading offset
+    (shares.Shares.bend, factors.motion.bend); mid_bend, gps_bend (G, 5),
+    rng_bend (R, 5): likewise at the rows', fixes' and ranges' places.
+    None: arcs."""
     mid_bend: np.ndarray | None = None
     gps_bend: np.ndarray | None = None
     rng_bend: np.ndarray | None = None
@@ -353,7 +354,9 @@ def build_keyframes(log: Log, t_start: float, keyframe_hz: float, causal: bool =
         k: the shares of the wheels' travel and of their difference, times dt.
         (The wheels' difference, not the gyro: on a nearly noise-free log it
         placed the fixes better than a 25 Hz gyro's interpolated turn, track
-        scale 6e-5 against 1.4e-4 off; tests/test_smoothers.py.)"""
+        scale 6e-5 against 1.4e-4 off, tests/test_smoothers.py, measured on
+        plain arcs. The bend, gps_bend, then lays the place on the path the
+        gyro turned.)"""
         t0, t1 = t[k], t[k + 1]
         return np.stack([sh.travel(t0, t1, ts), sh.wheel_turn(t0, t1, ts)], -1) * (t1 - t0)[:, None]
 
@@ -365,7 +368,7 @@ def build_keyframes(log: Log, t_start: float, keyframe_hz: float, causal: bool =
     empty2 = np.zeros((0, 2))
     gk = gs = gt = np.zeros(0)
     gxy = gvw = empty2
-    gb = np.zeros((0, 4))
+    gb = np.zeros((0, 5))
     if log.gps is not None and len(log.gps.t):
         g = log.gps
         k, inside = bin_times(t, g.t)
@@ -377,7 +380,7 @@ def build_keyframes(log: Log, t_start: float, keyframe_hz: float, causal: bool =
         gt = g.t[inside]
     rk = rz = rid = np.zeros(0)
     rb = rvw = empty2
-    rbd = np.zeros((0, 4))
+    rbd = np.zeros((0, 5))
     if log.ranges is not None and len(log.ranges.t):
         rg = log.ranges
         k, inside = bin_times(t, rg.t)

@@ -1,16 +1,22 @@
 """How far the robot got inside an interval by a given time: the share of the
 interval's wheel travel, of the wheels' difference, and of the gyro's turn.
 
-A pose inside an interval [t0, t1] lies on the arc of the interval's average
-velocity (factors.motion.arc_at), but not at the time's share of it: a robot
-that accelerates covers most of an interval's travel late, and one whose
-pivot ends early in an interval has done most of its turn by its middle.
-The wheels say how far it went; the gyro says how far it turned (the
-wheels' difference is slip and noise as much as turning). Each share falls
-back to another where its channel moved no more than its noise.
+A pose inside an interval [t0, t1] is placed on the arc of the interval's
+average velocity (factors.motion.arc_at), not at the time's share of it: a
+robot that accelerates covers most of an interval's travel late, and one
+whose pivot ends early in an interval has done most of its turn by its
+middle. The wheels say how far it went; the gyro says how far it turned
+(the wheels' difference is slip and noise as much as turning). Each share
+falls back to another where its channel moved no more than its noise.
 
-Used by the smoothers' keyframes (fixes' and rows' places in their
-intervals, estimators.keyframes) and by rows written at other times
+The arc itself bends the whole distance, where a robot that drove straight
+and then pivoted went straight: ``bend`` says how the path dead-reckoned
+inside the interval differs from it (factors.motion.bend), ``chord_angle``
+how its chord runs against the mean heading (analysis.sideways), and
+``path_between`` gives the path itself (analysis.resample).
+
+Used by the smoothers' keyframes (transitions', fixes' and rows' places in
+their intervals, estimators.keyframes) and by rows written at other times
 (analysis.resample), so that both place a pose the same way.
 """
 from __future__ import annotations
@@ -23,6 +29,12 @@ from odomgraph.io.log import Log
 #: The gyro's turn inside an interval is taken as a turn beyond this many
 #: sigmas of its integrated noise.
 GYRO_Z = 3.0
+#: A turn that goes beyond the interval's own by more than this [rad] and
+#: back has the heading's offset in Shares.bend.
+OVERSHOOT_RAD = 0.01
+#: A gap between gyro samples longer than this many of their median period
+#: is a dropout: the path's heading there is the wheels' (Shares.bend).
+GAP_PERIODS = 3.0
 
 
 def share(c0, c1, ct, eps, fallback) -> np.ndarray:
@@ -84,6 +96,9 @@ class Shares:
             # likewise no turn across a pause of the gyro
             self.gcum = np.concatenate([[0.0], np.cumsum(np.where(dt > PAUSE_S, 0.0, 0.5 * (g.omega[1:] + g.omega[:-1]) * dt))])
         self.gyro_sigma = r.gyro_sigma
+        if self.gyro is not None:
+            self._gaps = np.append(np.diff(g.t), 0.0)       # (the last pads reduceat)
+            self._gap_max = GAP_PERIODS * float(np.median(self._gaps[:-1]))
 
     def _wheels(self, c, t0, t1, ts):
         frac = (ts - t0) / np.maximum(t1 - t0, 1e-12)
@@ -109,16 +124,37 @@ class Shares:
         eps = np.where(n >= 2, GYRO_Z * self.gyro_sigma * (t1 - t0) / np.sqrt(np.maximum(n, 1)), np.inf)
         return share(self._turned(t0, t1), self._turned(t1, t1), self._turned(ts, t1), eps, fallback)
 
+    def _gyro_covers(self, t0, t1) -> np.ndarray:
+        """(len,) whether the gyro's samples cover [t0, t1], from the last
+        sample at or before t0 on, with no gap longer than GAP_PERIODS of
+        their median period (the log's: an interval's own mean period grows
+        with the gap inside it and let a 2.6 s gap through): the headings
+        the path reads (each from the last sample before its row) are then
+        the gyro's, not a rate held across a dropout (a second read: a 3 s
+        dropout in a turn bent a transition's chord 21 mm sideways, 5 sigma;
+        0.13 m on another log)."""
+        t0, t1 = np.atleast_1d(t0), np.atleast_1d(t1)
+        if self.gyro is None:
+            return np.zeros(np.shape(t0), bool)
+        gt = self.gyro.t
+        a = np.searchsorted(gt, t0, side="right") - 1
+        b = np.searchsorted(gt, t1, side="right") - 1
+        ok = (a >= 0) & (b > a)
+        a, b = np.where(ok, a, 0), np.where(ok, b, 1)
+        widest = np.maximum.reduceat(self._gaps, np.column_stack([a, b]).ravel())[::2]
+        return ok & (widest <= self._gap_max) & (t1 - gt[b] <= self._gap_max)
+
     def _gyro_n(self, t0, t1) -> np.ndarray:
         """(len,) gyro samples inside [t0, t1]."""
         gt = self.gyro.t
         return np.searchsorted(gt, t1, side="right") - np.searchsorted(gt, t0, side="left")
 
     def bend(self, t0, t1, ts, s_v, s_w) -> np.ndarray:
-        """(len, 4) how the path from t0 to ts differs from the arc that
+        """(len, 5) how the path from t0 to ts differs from the arc that
         places ts (factors.motion.bend): (re, im) of a complex factor q on
-        the arc's displacement, then (re, im) of an offset o [m] in the
-        body frame at t0. The path is dead-reckoned from the wheels' travel,
+        the arc's displacement, (re, im) of an offset o [m] in the body
+        frame at t0, and an offset [rad] of the heading where the path's
+        turn went beyond the interval's and back (else 0). The path is dead-reckoned from the wheels' travel,
         turned by the gyro's integral (by the wheels' difference over the
         nominal track where [t0, t1] holds fewer than two gyro samples); the
         arc is the interval's travel and turn at the shares (s_v, s_w) the
@@ -149,21 +185,27 @@ class Shares:
         ok = (np.abs(A) > self.eps) & (along <= 2.0 * np.abs(D)) & (np.abs(q) >= 0.5) & (np.abs(q) <= 2.0)
         q = np.where(ok, q, 1.0)
         o = np.where(ok, 0.0, D - A)
-        return np.stack([q.real, q.imag, o.real, o.imag], -1)
+        # A turn that overshoots and comes back inside the interval: its share
+        # (clipped to [0, 1]) cannot say where the heading was; the path's
+        # turn beyond the interval's does (a probe's S-curves at 1 Hz
+        # keyframes: rows 0.88 rad off at sigma 0.038, status ok).
+        turn, turned = H(t1) - h0, H(ts) - h0
+        beyond = np.maximum(turned - np.maximum(turn, 0.0), 0.0) + np.minimum(turned - np.minimum(turn, 0.0), 0.0)
+        o_th = np.where(np.abs(beyond) > OVERSHOOT_RAD, turned - s_w * turn, 0.0)
+        return np.stack([q.real, q.imag, o.real, o.imag, o_th], -1)
 
-    def path_ratio(self, t0, t1, ts) -> np.ndarray:
-        """(len, 2) where the path inside [t0, t1] had got to by ts, as the
-        complex ratio (re, im) of its displacement since t0 to the whole
-        interval's: a point between two known poses p0, p1 (complex
-        positions) is p0 + r (p1 - p0), the path's shape laid on their
-        chord (analysis.resample). NaN where the interval's displacement is
-        under two ticks or the path runs more than twice as far."""
+    def path_between(self, t0, t1, ts):
+        """The dead-reckoned path inside [t0, t1] (arrays (len,) [s]), in
+        the body frame at t0: (d_ts, d_t1) complex displacements [m] to ts
+        and to t1, (h_ts, h_t1) turns [rad] to them, and whether the
+        displacement to t1 is well conditioned (``_path``). For placing
+        points between two known poses (analysis.resample)."""
         t0, t1, ts = (np.asarray(a, float) for a in (t0, t1, ts))
-        P, _, ok = self._path(t0, t1)
+        P, H, ok = self._path(t0, t1)
+        h0 = H(t0)
+        turn = np.exp(-1j * h0)
         p0 = P(t0)
-        chord = P(t1) - p0
-        r = (P(ts) - p0) / np.where(ok, chord, 1.0)
-        return np.where(ok[:, None], np.stack([r.real, r.imag], -1), np.nan)
+        return turn * (P(ts) - p0), turn * (P(t1) - p0), H(ts) - h0, H(t1) - h0, ok
 
     def _path(self, t0, t1):
         """(P, H, ok): the dead-reckoned positions P(times) (complex) and
@@ -174,7 +216,7 @@ class Shares:
         if self._paths is None:
             self._paths = self._dead_reckoned()
         Pa, Ha, length = self._paths
-        j = (self._gyro_n(t0, t1) >= 2) if self.gyro is not None else np.zeros(np.shape(t0), bool)
+        j = self._gyro_covers(t0, t1)
         P = lambda x: np.where(j, _interp(x, self.t, Pa[:, 1]), _interp(x, self.t, Pa[:, 0]))
         H = lambda x: np.where(j, np.interp(x, self.t, Ha[:, 1]), np.interp(x, self.t, Ha[:, 0]))
         D = np.abs(P(t1) - P(t0))
