@@ -522,7 +522,8 @@ def _with_noise_scales(est: Estimate, log: Log, method: Method, schedule: Schedu
     """Widen GPS and range sigmas that the data say are too small, and run
     again (at most twice): every sigma of the estimate inherits them
     (analysis.noise). The scales found and applied go into the result."""
-    from odomgraph.analysis.noise import (NARROW_BELOW, NARROW_MIN_COUNT, WIDEN_ABOVE, correlation_factors, floored,
+    from odomgraph.analysis.noise import (NARROW_BELOW, NARROW_MIN_COUNT, WIDEN_ABOVE, WIDEN_FLAG_ABOVE,
+                                          correlation_factors, floored,
                                           gps_sigma_floor, measured_count, measured_from, noise_scales, widened)
     applied: dict[str, float] = {}
     cur = log
@@ -563,6 +564,18 @@ def _with_noise_scales(est: Estimate, log: Log, method: Method, schedule: Schedu
         est.noise_scales.setdefault("gps", {"measured": 1.0, "correlation": 0.0, "applied": 1.0}).update(
             floor_factor=fl[0], floor_m=fl[1])
     est.warnings += floor_note
+    for k, f in applied.items():
+        if f > WIDEN_FLAG_ABOVE:
+            # No sigma is set that wrong by accident as often as an estimate
+            # fails to follow its fixes: a probe's fixed-lag at 0.5 Hz
+            # keyframes through big slips, 45 m off with its fixes' sigma
+            # widened 300x (z 4.4, 82 % inside 3 sigma), status ok.
+            what = "fixes" if k == "gps" else "ranges"
+            line = (f"{k}: the {what} scattered {f:.0f}x their sigma about the estimate, which then widened it "
+                    f"as much: an estimate that did not follow them, or a sigma far off; not trustworthy (check "
+                    "the sigma; try --method batch, or a higher --keyframe-hz)")
+            est.warnings.insert(0, line)
+            est.flags.append(line)
     per_fix = log.gps is not None and log.gps.sigma is not None
     for k, f in applied.items():
         conf = log.robot.gps_sigma if k == "gps" else log.robot.range_sigma

@@ -40,6 +40,10 @@ import numpy as np
 CHI2_MEDIAN = {1: 0.4549, 2: 1.3863}
 #: A scale this far above 1 is acted on (and reported).
 WIDEN_ABOVE = 1.3
+#: A widening this large flags the estimate (pipeline._with_noise_scales):
+#: an estimate that did not follow its fixes, more often than a sigma set
+#: that wrong.
+WIDEN_FLAG_ABOVE = 30.0
 #: Fewest measurements a scale is estimated from.
 MIN_COUNT = 20
 #: A scale this far below 1, from NARROW_MIN_COUNT measurements or more
