@@ -238,7 +238,7 @@ def test_rows_at_other_times_on_the_path(name):
 @pytest.mark.parametrize("k, seed, hz, method", [(3.0, 55, 2.0, Method.batch), (1.0, 56, 1.0, Method.isam2)])
 def test_rows_at_other_times_follow_the_path(k, seed, hz, method):
     """--rate rows between two rows a second apart: the path's shape laid on
-    the chord between them (Shares.path_ratio); on the arc they were 2 cm
+    the chord between them (resample.path_poses); on the arc they were 2 cm
     RMS off, z 8-17, 97-98 % inside 3 sigma."""
     from odomgraph.analysis.resample import regular_times, resampled
     log = quick(k, seed)
