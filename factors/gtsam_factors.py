@@ -160,7 +160,7 @@ def _q(q):
 
 def gps_factor(kx, kw, z, tau, lever, noise, q=None) -> gtsam.CustomFactor:
     """Antenna fix z (2,) [m] at tau after keyframe k, on X(k), W(k); tau [s] is a
-    time or the effective (tau_v, tau_omega) of motion.arc_at; q (4,) or (5,): the
+    time or the effective (tau_v, tau_omega) of motion.arc_at; q (4,), (5,) or (8,): the
     path's bend there (Keyframes.gps_bend), or None: the arc."""
     return gtsam.CustomFactor(noise, [kx, kw], partial(_gps_error, np.asarray(z, float), _tau(tau),
                                                       tuple(lever), _q(q)))

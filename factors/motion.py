@@ -100,24 +100,36 @@ def velocity_between(x, y, theta, x1, y1, theta1, dt):
     return along / (dt * sinc(half) * np.cos(half)), omega
 
 
-def bend(pose, J, x, y, theta, q):
+def bend(pose, J, x, y, theta, q, omega=None):
     """The arc's displacement from (x, y) bent to the path's shape: turned
     and stretched by a complex factor, plus an offset in the start's body
-    frame.
+    frame, plus the path's own change with the turn rate.
 
     An arc of the interval's average curvature bends the whole distance; a
     robot that drove straight and then pivoted went straight (a probe's
     paper log 3x faster at 2 Hz keyframes: keyframes 0.31 m off at z 14). q
     is data (estimators.shares.Shares.bend, from the dead-reckoned path and
     the nominal calibration), (1, 0, 0, 0) for a constant-curvature
-    interval; the heading is the arc's.
+    interval; the heading is the arc's, plus q's offset (..., 4) where the
+    path's turn overshot the interval's.
+
+    The factor alone would move the bent chord with omega as the arc's chord
+    moves (turned by half the extra turn); the path's chord moves by where
+    its turn happened (none for a straight run ending in a pivot, the whole
+    extra turn for one starting with it). With (..., 8) q the displacement
+    gains c (omega - omega0), c in the start's body frame, so that its
+    omega-derivative is the path's (Shares.bend: a gyro's bias turns the
+    path's heading evenly in time; a track-width error scales the wheels'
+    heading profile with the turn).
 
     Args:
         pose: (..., 3) from propagate or arc_at; J: (..., 3, 5) its Jacobian.
         x, y, theta: (...) the start pose [m, rad].
         q: (..., 4) (re, im) of the factor, (re, im) of the offset [m, body
             frame at the start]; or (..., 5) with an offset of the heading
-            [rad]; or None.
+            [rad]; or (..., 8) with (re, im) of c [m s/rad] and omega0
+            [rad/s]; or None.
+        omega: (...) the interval's yaw rate [rad/s]; needed with (..., 8) q.
 
     Returns:
         pose, J: bent (new arrays); the inputs when q is None.
@@ -129,6 +141,12 @@ def bend(pose, J, x, y, theta, q):
     c, s = np.cos(theta), np.sin(theta)
     pose, J = pose.copy(), J.copy()
     dx, dy = pose[..., 0] - x, pose[..., 1] - y
+    if q.shape[-1] > 5:
+        if omega is None:
+            raise ValueError("bend: an (..., 8) q needs omega")
+        # c (omega - omega0) joins the offset; its omega-column below
+        d_w = np.asarray(omega, float) - q[..., 7]
+        ox, oy = ox + q[..., 5] * d_w, oy + q[..., 6] * d_w
     pose[..., 0] = x + a * dx - b * dy + c * ox - s * oy
     pose[..., 1] = y + b * dx + a * dy + s * ox + c * oy
     # the columns of theta, v, omega move the displacement; x, y the start;
@@ -138,6 +156,9 @@ def bend(pose, J, x, y, theta, q):
     J[..., 1, 2:] = b[..., None] * jx + a[..., None] * jy
     J[..., 0, 2] += -s * ox - c * oy
     J[..., 1, 2] += c * ox - s * oy
+    if q.shape[-1] > 5:
+        J[..., 0, 4] += c * q[..., 5] - s * q[..., 6]
+        J[..., 1, 4] += s * q[..., 5] + c * q[..., 6]
     if q.shape[-1] > 4:
         pose[..., 2] += q[..., 4]
     return pose, J
@@ -158,7 +179,7 @@ def arc_at(x, y, theta, v, omega, tau_v, tau_omega, q=None):
         x, y, theta: (...) pose at the start of the interval, world frame [m, rad].
         v, omega: (...) interval-average forward speed [m/s] and yaw rate [rad/s].
         tau_v, tau_omega: (...) effective times [s].
-        q: (..., 4|5) the path's bend (``bend``), or None: the arc.
+        q: (..., 4|5|8) the path's bend (``bend``), or None: the arc.
 
     Returns:
         pose: (..., 3); J: (..., 3, 5) d pose / d (x, y, theta, v, omega).
@@ -168,7 +189,7 @@ def arc_at(x, y, theta, v, omega, tau_v, tau_omega, q=None):
     pose, J = propagate(x, y, theta, v * tau_v, omega * tau_omega, np.ones_like(tau_v))
     J[..., 3] *= tau_v[..., None]
     J[..., 4] *= tau_omega[..., None]
-    return bend(pose, J, x, y, theta, q)
+    return bend(pose, J, x, y, theta, q, omega)
 
 
 def transition_residual(x, y, theta, v, omega, dt, x1, y1, theta1, q=None):
@@ -177,7 +198,7 @@ def transition_residual(x, y, theta, v, omega, dt, x1, y1, theta1, q=None):
     e = [R(theta_p)^T (p1 - p_p), wrap(theta1 - theta_p)] with (p_p, theta_p) =
     propagate(x, y, theta, v, omega, dt): the along-track, lateral [m] and
     heading [rad] disagreement of pose 1 with the arc flown from pose 0,
-    its chord bent by q ((..., 4|5), ``bend``; None: the arc).
+    its chord bent by q ((..., 4|5|8), ``bend``; None: the arc).
 
     Returns:
         e: (..., 3).
@@ -185,7 +206,7 @@ def transition_residual(x, y, theta, v, omega, dt, x1, y1, theta1, q=None):
         J1: (..., 3, 3) d e / d (x1, y1, theta1), world-frame coordinates.
     """
     from odomgraph.factors._math import wrap_angle
-    pred, Jf = bend(*propagate(x, y, theta, v, omega, dt), x, y, theta, q)
+    pred, Jf = bend(*propagate(x, y, theta, v, omega, dt), x, y, theta, q, omega)
     shape = pred.shape[:-1]
     tp = pred[..., 2]
     c, s = np.cos(tp), np.sin(tp)

@@ -10,7 +10,7 @@ covariance are interpolated linearly. Given the log, a time's place on the
 arc is the share of the wheels' travel done by then, and its heading the
 share of the gyro's turn (estimators.shares, as the smoothers place their
 own rows), and the position follows the path's shape dead-reckoned between
-the two rows (Shares.path_ratio) where it is well conditioned; else the
+the two rows (Shares.path_between) where it is well conditioned; else the
 time's share on the arc. Outside the estimate's span nothing is
 extrapolated: those times are dropped.
 """

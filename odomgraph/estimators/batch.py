@@ -152,13 +152,16 @@ def initial_guess(prob: Problem, ekf: Estimate) -> tuple[np.ndarray, np.ndarray]
     ok = np.abs(np.diff(th_u)) < MAX_GUESS_TURN
     # The motion model bends the arc's chord to the path's shape
     # (Keyframes.trans_bend): the arc whose bent chord meets the next pose
-    # is the one whose plain chord meets it unbent.
+    # is the one whose plain chord meets it unbent, less the offset and the
+    # turn-rate term (omega from the headings alone, as velocity_between's).
     nxt = pose[1:, 0:2]
     q = prob.kf.trans_bend
     if q is not None:
         c0 = pose[:-1, 0] + 1j * pose[:-1, 1]
         rot = np.exp(1j * pose[:-1, 2])
-        body = (nxt[:, 0] + 1j * nxt[:, 1] - c0) / rot - (q[:, 2] + 1j * q[:, 3])
+        om = wrap_angle(pose[1:, 2] - pose[:-1, 2]) / prob.kf.dt
+        body = ((nxt[:, 0] + 1j * nxt[:, 1] - c0) / rot - (q[:, 2] + 1j * q[:, 3])
+                - (q[:, 5] + 1j * q[:, 6]) * (om - q[:, 7]))
         plain = c0 + rot * body / (q[:, 0] + 1j * q[:, 1])
         nxt = np.column_stack([plain.real, plain.imag])
     v, om = velocity_between(pose[:-1, 0], pose[:-1, 1], pose[:-1, 2], nxt[:, 0], nxt[:, 1], pose[1:, 2],

@@ -459,7 +459,7 @@ class _Runner:
             w[St.W_SLIP] = 0.0
         x, y, th = self.pose[k - 1]
         p, _ = bend(*propagate(x, y, th, self.W[k - 1, 0], self.W[k - 1, 1], kf.dt[k - 1]), x, y, th,
-                    None if kf.trans_bend is None else kf.trans_bend[k - 1])
+                    None if kf.trans_bend is None else kf.trans_bend[k - 1], self.W[k - 1, 1])
         self.pose[k] = [p[0], p[1], wrap_angle(p[2])]
         self.W[k] = self.W[k - 1]
 

@@ -25,7 +25,7 @@ import numpy as np
 
 from odomgraph.factors.encoder import speed_sigma
 from odomgraph.estimators.measurements import PAUSE_S
-from odomgraph.estimators.shares import Shares
+from odomgraph.estimators.shares import BEND_WIDTH, Shares
 from odomgraph.io.log import Log
 
 W_NAMES = ("v", "omega", "gyro_bias", "slip_left", "slip_right", "scale_left", "scale_right", "scale_track")
@@ -77,11 +77,11 @@ class Keyframes:
     gps_tau_vw's (the wheels' travel), tau_omega the gyro's share of the
     interval's turn (estimators.shares; half the interval without one)."""
     trans_bend: np.ndarray | None = None
-    """(N-1, 5) each interval's path against its arc: a complex factor on
-    the transition's chord, an offset, and a heading offset
-    (shares.Shares.bend, factors.motion.bend); mid_bend, gps_bend (G, 5),
-    rng_bend (R, 5): likewise at the rows', fixes' and ranges' places.
-    None: arcs."""
+    """(N-1, 8) each interval's path against its arc: a complex factor on
+    the transition's chord, an offset, a heading offset, and the chord's
+    change with the turn rate (shares.Shares.bend, factors.motion.bend);
+    mid_bend, gps_bend (G, 8), rng_bend (R, 8): likewise at the rows',
+    fixes' and ranges' places. None: arcs."""
     mid_bend: np.ndarray | None = None
     gps_bend: np.ndarray | None = None
     rng_bend: np.ndarray | None = None
@@ -345,7 +345,7 @@ def build_keyframes(log: Log, t_start: float, keyframe_hz: float, causal: bool =
     trans_bend = sh.bend(t0, t1, t1, np.ones(nint), np.ones(nint))
 
     def bent(k, ts, tvw):
-        """(len, 2) the bend at times ts in intervals k placed by tvw (effective)."""
+        """(len, BEND_WIDTH) the bend (Shares.bend) at times ts in intervals k placed by tvw (effective)."""
         dt = t[k + 1] - t[k]
         return sh.bend(t[k], t[k + 1], ts, tvw[:, 0] / dt, tvw[:, 1] / dt)
 
@@ -368,7 +368,7 @@ def build_keyframes(log: Log, t_start: float, keyframe_hz: float, causal: bool =
     empty2 = np.zeros((0, 2))
     gk = gs = gt = np.zeros(0)
     gxy = gvw = empty2
-    gb = np.zeros((0, 5))
+    gb = np.zeros((0, BEND_WIDTH))
     if log.gps is not None and len(log.gps.t):
         g = log.gps
         k, inside = bin_times(t, g.t)
@@ -380,7 +380,7 @@ def build_keyframes(log: Log, t_start: float, keyframe_hz: float, causal: bool =
         gt = g.t[inside]
     rk = rz = rid = np.zeros(0)
     rb = rvw = empty2
-    rbd = np.zeros((0, 5))
+    rbd = np.zeros((0, BEND_WIDTH))
     if log.ranges is not None and len(log.ranges.t):
         rg = log.ranges
         k, inside = bin_times(t, rg.t)
