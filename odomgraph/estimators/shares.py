@@ -36,8 +36,9 @@ OVERSHOOT_RAD = 0.01
 #: A gap between gyro samples longer than this many of their median period
 #: is a dropout: the path's heading there is the wheels' (Shares.bend).
 GAP_PERIODS = 3.0
-#: Shares.bend gives the path's own change with the turn rate where the
-#: interval turns by more than this [rad]; the arc's below.
+#: With the wheels' heading, Shares.bend gives the path's own change with
+#: the turn rate where the interval turns by more than this [rad]; the
+#: arc's below (with the gyro's, wherever the path is bent).
 TURN_CLEAR_RAD = 0.05
 #: Columns of Shares.bend (factors.motion.bend's q).
 BEND_WIDTH = 8
@@ -169,7 +170,7 @@ class Shares:
         arc is the interval's travel and turn at the shares (s_v, s_w) the
         caller places ts by (arrays (len,); 1, 1 at t1), both from the
         nominal calibration. Where the path is within two ticks of the arc,
-        the arc itself (1, 0, 0, 0, 0, 0, 0, omega0): the difference is noise.
+        the arc itself (1, 0, 0, 0, o_th, 0, 0, omega0): the difference is noise.
         Elsewhere where the arc's displacement is well
         conditioned, q = path / arc and o = 0: the path's shape, which the
         estimated calibration scales as it scales the arc. Elsewhere (a
@@ -222,7 +223,7 @@ class Shares:
         # Elsewhere the arc's own change stands.
         dt = t1 - t0
         omega0 = turn / np.maximum(dt, 1e-12)
-        gyro = self._gyro_covers(t0, t1)
+        gyro = self._gyro_covers(t0, t1)       # (again: _path's choice; kept out of its return for now)
         M = self._paths[3]
         col = lambda j: _interp(ts, self.t, M[:, j]) - _interp(t0, self.t, M[:, j])
         m0 = P(ts) - P(t0)
