@@ -148,6 +148,7 @@ def summary_lines(online: Online, st: StreamStats) -> list[str]:
     if s["restarts"]:
         out.append(f"stream: {len(s['restarts'])} restarts after a divergence (said above)")
     out += [f"warning: {w}" for w in s["warnings"]]
+    out += [f"flag: {f}" for f in s["flags"]]
     return out
 
 

@@ -180,6 +180,11 @@ class Online:
     method's options (EKFOptions, IncrementalOptions), as ``estimate``'s.
     """
 
+    # (an EKF checkpoint pickled before these existed loads without them)
+    _frame_free = False
+    _revised = None
+    _rev_prev = None
+
     def __init__(self, robot: RobotConfig, method="ekf", schedule: Schedule = Schedule(), latency: float = 0.25,
                  warmup: float | None = None, chunk: float = 0.1, context: float = 2.0, journal: bool = False,
                  **options):
@@ -232,6 +237,14 @@ class Online:
         self.alerts: list[str] = []         # warnings said as they arise (odomgraph stream prints them)
         self._settle_said = 0
         self._fail_t = None                 # time of the event being filtered (a divergence's)
+        # The estimator started with no absolute measurement and no [initial]
+        # pose: its frame is the start's own (the origin, heading 0) until the
+        # first fix or range, which starts it again in theirs (_anchor).
+        self._frame_free = False
+        # Rows that jumped further than the row before allowed (analysis.plausible.revision_jumps):
+        # [count, first t, last t, worst beyond [m], its z], and the row the next is judged against.
+        self._revised: list | None = None
+        self._rev_prev = None
         # A smoother's GTSAM state cannot be pickled: its checkpoint is every
         # measurement pushed so far, replayed on load (deterministic, so equal).
         self.journal: list | None = [] if journal else None
@@ -452,7 +465,26 @@ class Online:
             self._restart(exc)
             return []
 
-    def _restart(self, exc: Exception) -> None:
+    def _anchor(self) -> list[OnlineRow]:
+        """The first fix or range came after the estimator had started in the
+        start's own frame (no absolute measurement in the warm-up, no
+        [initial] pose): nothing ties that frame to theirs, and an estimator
+        that took them anyway bent its scale factors to join the two (a
+        probe: the first fix 35 s in, isam2's wheel scales 12 sigma off,
+        status ok). The stream starts again from the last row on, as at a
+        fresh start: a warm-up that fits the start to the fixes. The rows so
+        far stay in the start's own frame, and the restart says so."""
+        from odomgraph.errors import OdomgraphError
+        firsts = [(rows[0][0], name) for name, rows in self._raw.items() if name in ("gps", "ranges") and rows]
+        t_abs, name = min(firsts)
+        self._frame_free = False
+        self._restart(OdomgraphError(
+            f"the first {'GPS fix' if name == 'gps' else 'range'} came at t={t_abs:.2f} s, after the estimator had "
+            "started without any absolute measurement or [initial] pose: the rows before are in the start's own "
+            "frame (the origin, heading 0), not theirs"), anchor=True)
+        return []
+
+    def _restart(self, exc: Exception, anchor: bool = False) -> None:
         """The estimator diverged beyond its own recoveries: a robot still
         needs an estimate, so start again on the data from the failing event
         on, at the last row's pose with a wide sigma (or as at the start,
@@ -460,12 +492,15 @@ class Online:
         scale factors, where they are plausible: within 10 % of nominal):
         the EKF holds them (slip only: calibrate_until 0, a short warm-up),
         a smoother calibrates again around them. Rows still give the scale
-        factors against robot.toml's."""
+        factors against robot.toml's. ``anchor`` (_anchor): neither pose nor
+        scale factors carry over, and the schedule stays: a fresh start."""
         from dataclasses import replace as dc_replace
         from odomgraph.io.robot import InitialPose
         # from the failing event on (the rows of the chunk that failed are the diverging ones)
         t_r = max(self.last.t if self.last is not None else self.t_first, self._fail_t or -math.inf)
-        if self.last is not None:
+        if anchor:
+            self.robot = self.robot.with_(initial=None)
+        elif self.last is not None:
             x, y, th = (float(v) for v in self.last.mean[:3])
             sx, sy, sth = (float(v) for v in self.last.sigma[:3])
             sc = self.last.mean[S.SCALE_S]
@@ -489,7 +524,7 @@ class Online:
                                                                      self.robot.process.initial_scale_sigma)))
             self.robot = self.robot.with_(initial=InitialPose(x, y, th, (max(3 * sx, 1.0), max(3 * sy, 1.0),
                                                                          max(3 * sth, 0.5))))
-        if self.method is Method.ekf:
+        if self.method is Method.ekf and not anchor:
             # the EKF holds them from the start (slip only); a smoother has no hold, and calibrates again
             # with them as its prior's centre
             self.schedule = dc_replace(self.schedule, calibrate_until=0.0)
@@ -502,15 +537,31 @@ class Online:
         firsts = [rows[0][0] for rows in self._raw.values() if rows]
         self.t_first = min(firsts) if firsts else None
         self.ekf = self.smoother = None
+        self._rev_prev = None            # a new run's rows are not judged against the last one's
         self._settle_said = 0            # the new runner's settle warnings start from none
         self.t_done = -math.inf
-        self.restarts.append(f"t={t_r:.2f} s: {' '.join(str(exc).split())}; restarted from the last estimate's "
-                             f"pose (sigma widened) and scale factors, warming up again for {self.warmup:g} s")
+        self.restarts.append(f"t={t_r:.2f} s: {' '.join(str(exc).split())}; " + (
+            f"started again in their frame, warming up for {self.warmup:g} s" if anchor else
+            f"restarted from the last estimate's pose (sigma widened) and scale factors, warming up again for "
+            f"{self.warmup:g} s"))
 
     def _advance_once(self, final: bool) -> list[OnlineRow]:
         if self.t_first is None:
             return []
         if self.ekf is None and self.smoother is None:
+            if not self._warmup_given and self.robot.initial is None and self.method is not Method.ekf:
+                # The start is fitted to the fixes (or ranges) of CONSENSUS_WINDOW
+                # seconds from the first: a first fix late in the warm-up
+                # extends it (one fix 35 s in fitted a start 17 m off only on
+                # the circle its path allows, and isam2 bent its scale factors
+                # to that prior). Streams whose fixes begin with them are not
+                # held longer. The EKF takes such a start as one with no heading
+                # (estimators.heading), which it handles causally; the fit on
+                # the late fixes, carried back, gives it a heading of sigma pi
+                # that it took as a Gaussian (a mirror solution, 1 m off at z 89).
+                firsts = [rows[0][0] for name in ("gps", "ranges") if (rows := self._raw[name])]
+                if firsts:
+                    self.warmup = max(self.warmup, min(firsts) - self.t_first + CONSENSUS_WINDOW + WARMUP_MARGIN)
             if not final and self.t_released < self.t_first + self.warmup:
                 return []
             self._start(final)
@@ -521,6 +572,8 @@ class Online:
             b = self._final_before(SPIKE_HALF)
         else:
             b = self._final_before()
+        if self._frame_free and (self._raw["gps"] or self._raw["ranges"]):
+            return self._anchor()
         if self.smoother is not None:
             out = self.smoother.feed(self, b, final)
             said = getattr(self.smoother.runner, "settle_warnings", [])   # isam2's start heading (incremental.py)
@@ -532,13 +585,51 @@ class Online:
         else:
             out = self._filter(b)
         if out:
+            self._check_revisions(out)
             self.last = out[-1]
         self._prune()
+        return out
+
+    def _check_revisions(self, out: list[OnlineRow]) -> None:
+        """Flag rows that jumped further from the row before than the robot
+        could drive, by many of that row's sigma: the row before was far off
+        at a small sigma (analysis.plausible.revision_warnings, as a whole
+        run's causal rows are judged). Said once as an alert, counted in
+        summary()["flags"]."""
+        from odomgraph.analysis.plausible import revision_jumps, revision_line
+        rows = ([self._rev_prev] if self._rev_prev is not None else []) + out
+        self._rev_prev = out[-1]
+        if len(rows) < 2:
+            return
+        t = np.array([r.t for r in rows])
+        bad, beyond, z = revision_jumps(t, np.stack([r.mean for r in rows]), np.stack([r.sigma for r in rows]))
+        for i in bad:
+            if self._revised is None:
+                self._revised = [0, float(t[i]), float(t[i + 1]), 0.0, 0.0]
+                self.alerts.append(revision_line(f"{self.method.value} (stream)", 1, float(t[i]), float(t[i + 1]),
+                                                 float(beyond[i]), float(z[i])))
+            r = self._revised
+            r[0] += 1
+            r[2] = float(t[i + 1])
+            if beyond[i] > r[3]:
+                r[3], r[4] = float(beyond[i]), float(z[i])
+
+    def flags(self) -> list[str]:
+        """What makes rows so far not trustworthy: rows that jumped
+        (_check_revisions), and at close a smoother's own flags."""
+        from odomgraph.analysis.plausible import revision_line
+        out = []
+        if self._revised is not None:
+            out.append(revision_line(f"{self.method.value} (stream)", *self._revised))
+        if self.final is not None:
+            out += [f for f in self.final.flags if f not in out]
         return out
 
     def _start(self, final: bool = False) -> None:
         """Warm-up done: the whole-log decisions on the rows so far (see the module doc)."""
         log = self._log(-math.inf)
+        self._frame_free = self._frame_free or (self.robot.initial is None and log.gps is None
+                                                and log.ranges is None)
         wheel = log.encoders if log.encoders is not None else log.wheel_speeds
         if wheel is None or len(wheel.t) < 3:
             from odomgraph.errors import NotEnoughDataError
@@ -629,7 +720,8 @@ class Online:
                 getattr(self.smoother.runner, "settle_warnings", []))
             if self.smoother.watch is not None:
                 from odomgraph.estimators.heading import warning
-                warnings.append(warning(self.smoother.watch.t_known, self.smoother.runner.prob.meas.t_start))
+                warnings.append(warning(self.smoother.watch.t_known, self.smoother.runner.prob.meas.t_start,
+                                        self.smoother.watch))
         for k, v in self._nis.items():
             if v[1] >= 100 and v[0] / v[1] > NIS_WARN * v[2]:
                 warnings.append(f"{k}: mean NIS {v[0] / v[1]:.1f} over {v[1]} updates, expected {v[2]}: the "
@@ -643,7 +735,7 @@ class Online:
                 "repeated_stamps": dict(c.repeated), "recoveries": list(eng.recoveries) if eng else [],
                 "restarts": list(self.restarts), "rejected_ahead": dict(c.ahead),
                 "mean_nis": {k: {"mean": v[0] / v[1], "dof": v[2], "n": v[1]} for k, v in self._nis.items() if v[1]},
-                "warnings": warnings,
+                "warnings": warnings, "flags": self.flags(),
                 "notes": list(self.notes), "warmup_s": self.warmup, "latency_s": self.latency}
 
     # ------------------------------------------------------ checkpoints
@@ -862,6 +954,7 @@ class _Smoother:
         r = self.runner
         n = r.prob.kf.n
         if final:
+            r.end_hold()
             est = r.smoother.calculateEstimate()
             for j in np.nonzero(~r.done[:n])[0]:
                 r._harvest(int(j), est)

@@ -89,16 +89,22 @@ def test_an_overshooting_update_is_caught_between_sparse_fixes(seed):
     ISAM2 step from linearisations at a guessed heading carried the online
     estimate away between two fixes, doubling its error every keyframe (2-20
     km off at sigma 5-11 m; the watch on fixes saw nothing, the next fix
-    being gated). _Runner._overshot trips at the first implausible step and
-    the recovery brings it back to within tens of metres."""
+    being gated). _Runner._overshot tripped at the first implausible step and
+    the recovery brought it back to within tens of metres. Since the start
+    is settled from the first fix on (no gate while unsettled, a re-solve
+    from the prior at once: ISAM2Runner._settle_start), the step no longer
+    comes: 12 m at most, every row inside 2.6 sigma (seed 83)."""
     base = yard(150.0)
     sc = base.with_(robot=base.robot.with_(gps_sigma=10.0), rates=replace(base.rates, gps=0.2))
     log = inject(sc, Faults(), seed)
     est = estimate(log, "isam2", Schedule(), fit_noise=False)
     on = est.online
-    pos = np.hypot(on.mean[:, 0] - log.truth.at("x", on.t), on.mean[:, 1] - log.truth.at("y", on.t))
-    assert any("overshot" in r for r in est.recoveries), est.recoveries
-    assert pos.max() < 1000.0, f"online position error {pos.max():.0f} m"     # was 2.3-18 km
+    ex = on.mean[:, 0] - log.truth.at("x", on.t)
+    ey = on.mean[:, 1] - log.truth.at("y", on.t)
+    pos = np.hypot(ex, ey)
+    assert pos.max() < 50.0, f"online position error {pos.max():.0f} m"      # was 2.3-18 km, then tens of m
+    z = np.maximum(np.abs(ex) / on.sigma[:, 0], np.abs(ey) / on.sigma[:, 1])
+    assert z.max() < 4.0 or est.flags, z.max()
 
 
 @pytest.mark.parametrize("segment", [1.0, 2.0])

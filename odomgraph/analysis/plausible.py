@@ -149,11 +149,33 @@ REVISION_SIGMAS = 6.0
 REVISION_MIN = 0.2
 
 
+def revision_jumps(t: np.ndarray, mean: np.ndarray, sigma: np.ndarray):
+    """(i (M,), beyond (N-1,) [m], z (N-1,)): the rows i whose next row, of
+    causal rows t (N,) [s], mean, sigma (N, 11), landed ``beyond`` metres
+    further than the robot could drive in between (the larger |v| of the two
+    times the interval), ``z`` of row i's position sigma (x and y together),
+    both beyond REVISION_SIGMAS and REVISION_MIN (revision_warnings)."""
+    dt = np.diff(t)
+    d = np.hypot(np.diff(mean[:, S.X]), np.diff(mean[:, S.Y]))
+    reach = np.maximum(np.abs(mean[:-1, S.V]), np.abs(mean[1:, S.V])) * dt
+    beyond = d - reach
+    s = np.hypot(sigma[:-1, S.X], sigma[:-1, S.Y])
+    z = beyond / np.maximum(s, 1e-12)
+    return np.flatnonzero((beyond > REVISION_MIN) & (z > REVISION_SIGMAS) & (dt > 0)), beyond, z
+
+
+def revision_line(name: str, n: int, t0: float, t1: float, beyond: float, z: float) -> str:
+    """The flag of n revisions between t0 and t1 [s], the worst ``beyond`` [m] at ``z`` sigma."""
+    return (f"{name}: {n} time(s) from t={t0:.1f} to {t1:.1f} s a row landed further from the one before than "
+            f"the robot could drive (at most {beyond:.1f} m beyond it, {z:.0f} sigma of the row before; allowed "
+            f"{REVISION_SIGMAS:g}): the rows before such a jump were far off at a small sigma there; not trustworthy")
+
+
 def revision_warnings(name: str, t: np.ndarray, mean: np.ndarray, sigma: np.ndarray) -> list[str]:
     """One line when causal rows t (N,) [s], mean, sigma (N, 11) jump: a row
     revised further than REVISION_SIGMAS of the position sigma of the row
     before it, beyond the distance the robot could have driven between them
-    (the larger |v| of the two times the interval). [] when none does.
+    (revision_jumps). [] when none does.
 
     Why: each causal row is an estimate from the data up to its time; the
     next one knows more. For a consistent estimator the revision has
@@ -167,17 +189,9 @@ def revision_warnings(name: str, t: np.ndarray, mean: np.ndarray, sigma: np.ndar
     reach (303 m)."""
     if len(t) < 2:
         return []
-    dt = np.diff(t)
-    d = np.hypot(np.diff(mean[:, S.X]), np.diff(mean[:, S.Y]))
-    reach = np.maximum(np.abs(mean[:-1, S.V]), np.abs(mean[1:, S.V])) * dt
-    beyond = d - reach
-    s = np.hypot(sigma[:-1, S.X], sigma[:-1, S.Y])
-    z = beyond / np.maximum(s, 1e-12)
-    bad = np.flatnonzero((beyond > REVISION_MIN) & (z > REVISION_SIGMAS) & (dt > 0))
+    bad, beyond, z = revision_jumps(t, mean, sigma)
     if not bad.size:
         return []
     worst = bad[np.argmax(beyond[bad])]
-    return [f"{name}: {bad.size} time(s) from t={float(t[bad[0]]):.1f} to {float(t[bad[-1] + 1]):.1f} s a row "
-            f"landed further from the one before than the robot could drive (at most {float(beyond[worst]):.1f} m "
-            f"beyond it, {float(z[worst]):.0f} sigma of the row before; allowed {REVISION_SIGMAS:g}): the rows before "
-            "such a jump were far off at a small sigma there; not trustworthy"]
+    return [revision_line(name, bad.size, float(t[bad[0]]), float(t[bad[-1] + 1]), float(beyond[worst]),
+                          float(z[worst]))]

@@ -704,7 +704,7 @@ def smoother_estimate(prob: Problem, schedule: Schedule, pose: np.ndarray, W: np
             o = extra["online"]
             n += heading.widen_rows(o.t, o.sigma, o.pose_cov, until, watch)
         if n:
-            warnings = list(warnings) + [heading.warning(until, prob.meas.t_start)]
+            warnings = list(warnings) + [heading.warning(until, prob.meas.t_start, watch)]
     from odomgraph.estimators import gaps
     # A silence of every sensor: the rows there are drawn between the states
     # either side, which say nothing of the path's shape (a probe's 30 s

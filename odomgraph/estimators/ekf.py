@@ -589,6 +589,7 @@ class EKF:
                 hw.fix(t, z)
             if hw.known:
                 self.heading_known_at = hw.t_known
+                self.heading_decided = hw          # what it waited for (heading.warning)
                 self.heading_watch = hw = None
         if long_row and self.pauses \
                 and min(t + 0.5 * aux[1], self.pauses[-1][1]) - max(t - 0.5 * aux[1], self.pauses[-1][0]) > 0:
@@ -766,7 +767,7 @@ class EKF:
             return []
         from odomgraph.estimators.heading import warning
         return [warning(self.heading_known_at if self.heading_known_at is not None else float("inf"),
-                        self.meas.t_start)]
+                        self.meas.t_start, getattr(self, "heading_decided", None) or self.heading_watch)]
 
 
 def event_values(meas, code: int, i: int) -> tuple:

@@ -87,6 +87,8 @@ class HeadingWatch:
         self._fixes: deque = deque()
         self._fix0: np.ndarray | None = None
         self.t_known = math.inf
+        # when the wheels moved, and the first fix [s]: which of them the heading waited for (warning)
+        self.t_wheels = self.t_first_fix = math.inf
         # the dead-reckoned antenna summed over the fixes so far, and how many
         self._a_sum, self._n_fix = np.zeros(2), 0
         # arm(): its value from each event on where it moved (arm_at), until the
@@ -99,7 +101,7 @@ class HeadingWatch:
         # a checkpoint written before the circle (odomgraph.online) has none of it
         self.__dict__.update(state)
         for name, value in (("_a_sum", np.zeros(2)), ("_n_fix", 0), ("_record_on", True), ("_hist_t", []),
-                            ("_hist_arm", [])):
+                            ("_hist_arm", []), ("t_wheels", math.inf), ("t_first_fix", math.inf)):
             self.__dict__.setdefault(name, value)
 
     @property
@@ -159,6 +161,7 @@ class HeadingWatch:
         self._record(t)
         if not self.wheels_moved and float(np.hypot(*(self._antenna() - self._a0))) >= self.thr:
             self.wheels_moved = True
+            self.t_wheels = float(t)
             self._done(t)
 
     def fix(self, t: float, xy, sigma: float | None = None) -> None:
@@ -166,6 +169,7 @@ class HeadingWatch:
             return
         self._a_sum += self._antenna()
         self._n_fix += 1
+        self.t_first_fix = min(self.t_first_fix, float(t))
         self._record(t)
         if self.fixes_moved:
             return
@@ -236,8 +240,17 @@ def widen_rows(t: np.ndarray, sigma: np.ndarray, pose_cov: np.ndarray | None, un
     return n
 
 
-def warning(until: float, t0: float) -> str:
-    """The one-line warning of a stretch with the heading unknown."""
+def warning(until: float, t0: float, watch: HeadingWatch | None = None) -> str:
+    """The one-line warning of a stretch with the heading unknown; with the
+    ``watch`` that decided, it names what the heading waited for: the robot
+    to move, or the fixes (which came late, or showed no motion yet)."""
+    if watch is not None and until < math.inf and watch.t_wheels < until:
+        first = (f"the first fix came at t={watch.t_first_fix - t0:.1f} s" if watch.t_first_fix < math.inf
+                 else "no fix came")
+        return (f"heading not observable until t={until - t0:.1f} s, when the fixes first showed the motion "
+                f"({first}; the wheels had moved from t={watch.t_wheels - t0:.1f} s): before it, heading sigma is "
+                "pi and x, y sigma include the circle the centre can lie on (the wheels' path's around the fixes' "
+                "mean)")
     if until == math.inf:
         return ("heading not observable: no motion showed which way the robot points (the wheels' path, or the "
                 "fixes' trailing median, never moved 3 fix sigmas, at least 5 cm, from where it started); heading "

@@ -141,6 +141,11 @@ class _Graph:
         self.gated: dict[str, int] = {}
         # interval -> its slip in wheel-speed units where its slip prior was last linearised
         self.slip_at: dict[int, np.ndarray] = {}
+        # The runner's start is unsettled (ISAM2Runner._settle_start): no gate. Its
+        # prediction is as unsure as the start's heading, and a gate that reads
+        # only the fix's own sigma refused the fixes that settle it (a first fix
+        # 35 s in: 15 gated, causal rows 6 m off at sigma 0.3 m).
+        self.gate_open = False
         self.gated_rows: set[tuple[str, int]] = set()   # ("gps" | "ranges", index) gated at first linearisation
         self.held_rows: set[tuple[str, int]] = set()    # those of them held out as a jump: never used
 
@@ -269,7 +274,8 @@ class _Graph:
         the robust loss."""
         if first:
             lin = linearize(self.lin_first, pose, W, k, k + 1)
-            self.first_gate(k, lin)
+            if not self.gate_open:
+                self.first_gate(k, lin)
         else:
             lin = linearize(self.lin_prob, pose, W, k, k + 1)
             self._drop_held(k, lin)
@@ -492,6 +498,7 @@ class _Runner:
         self._grow(k + 1)
         self._new_keyframe(k)
         pred = self.pose[k, :2].copy()
+        self.graph.gate_open = not self._settled
         factors = self.graph.interval_factors(k - 1, self.pose, self.W, first=True)
         self.step(k, factors, self.graph.values(k, self.pose, self.W))
         self.update_times[k] = time.perf_counter() - t0
@@ -500,6 +507,46 @@ class _Runner:
         reason = self._overshot(k, pred) or self._watch(k - 1)
         if reason is not None:
             self._trip(k, reason)
+
+    def _wheels_path(self, k: int) -> tuple[np.ndarray, np.ndarray]:
+        """(pose, W) with keyframes 0..k dead-reckoned from the prior's mean:
+        each interval's velocities from its wheels at the prior's scale
+        factors, no slip (as _new_keyframe across a pause)."""
+        kf, prior = self.prob.kf, self.prob.prior_mean
+        pose, W = self.pose.copy(), self.W.copy()
+        pose[0], W[0] = prior[0:3], prior[3:]
+        kl, kr, kb = prior[3:][St.W_SCALE]
+        for j in range(k):
+            w = W[0].copy()
+            ul, ur = kf.enc_m[j, 0] / kl, kf.enc_m[j, 1] / kr
+            w[St.W_VEL] = 0.5 * (ul + ur), (ur - ul) / (kb * self.prob.robot.track_width)
+            w[St.W_SLIP] = 0.0
+            W[j] = w
+            x, y, th = pose[j]
+            p, _ = bend(*propagate(x, y, th, w[0], w[1], kf.dt[j]), x, y, th,
+                        None if kf.trans_bend is None else kf.trans_bend[j], w[1])
+            pose[j + 1] = [p[0], p[1], wrap_angle(p[2])]
+            W[j + 1] = w
+        return pose, W
+
+    def _solve_start(self, k: int) -> None:
+        """Keyframes 0..k re-solved from the problem's prior (batch.solve_window)
+        from two starts, the lower cost kept: the estimate as it stands, and
+        the wheels' path from the prior's start (_wheels_path). A start held
+        at a heading that was a guess leaves linear factors that can put the
+        estimate in a basin Gauss-Newton does not leave (a probe: first fix
+        35 s after the start, 2 Hz keyframes, fixed-lag 24 m off), where
+        batch, started near the fixes, is right; the wheels' path from the
+        start the first fixes fitted (initial.consensus_pose) ends on them."""
+        best = None
+        for p0, w0 in ((self.pose, self.W), self._wheels_path(k)):
+            pose, W, _ = solve_window(self.prob, p0, w0, 0, k, None)
+            cost = float(linearize(self.prob, pose, W, 0, k).cost)
+            if np.isfinite(cost) and (best is None or cost < best[0]):
+                best = (cost, pose, W)
+        if best is None:
+            raise EstimatorDivergedError(f"{self.method}: re-solving the start gave a non-finite cost")
+        self.pose[:k + 1], self.W[:k + 1] = best[1][:k + 1], best[2][:k + 1]
 
     def _overshot(self, k: int, pred: np.ndarray) -> str | None:
         """The update moved keyframe k from its prediction ``pred`` (x, y) further
@@ -708,9 +755,14 @@ FAST_WATCH = 15.0
 SETTLE_HEADING = 0.2
 #: ... until a re-solve leaves the heading this sure [rad].
 SETTLE_HEADING_DONE = 0.05
+#: The settles' ages after the first fix or range [s]: at it, then doubling from twice this.
+SETTLE_FIRST = 0.125
 #: The first segment is kept open up to this many --segment lengths while its
 #: heading is unsettled (memory grows by as much, once).
 FIRST_SEGMENT_CAP = 4.0
+#: fixed-lag holds an unsettled start in its window for at most this long [s]
+#: (FixedLagRunner._settle_start; memory grows by as much, once).
+HOLD_CAP = 300.0
 
 #: ISAM2 boundary tangent order (X 3, W_KEY 6, S_KEY 2) -> keyframe block order (graph.py).
 _PERM = np.array([0, 1, 2] + [3 + i for i in W_IDX] + [3 + i for i in S_IDX])
@@ -785,7 +837,7 @@ class ISAM2Runner(_Runner):
         self.online = np.zeros((self.prob.kf.n, St.N))
         self.online_sigma = np.zeros((self.prob.kf.n, St.N))
         self._settled = float(np.sqrt(self.prob.prior_cov[2, 2])) <= SETTLE_HEADING
-        self._settle_next, self.settles, self._settled_at = 2.0, 0, -1
+        self._settle_next, self.settles, self._settled_at = 0.0, 0, -1
         self.settle_warnings: list[str] = []
 
     def step(self, k, factors, values):
@@ -838,7 +890,9 @@ class ISAM2Runner(_Runner):
         that were guesses, and a linear factor keeps its linearisation. Until
         the heading is known, the first segment is re-solved from its prior
         (Gauss-Newton over keyframes 0..k, as a recovery) at doubling ages
-        (2, 4, 8, ... s), and the ISAM2 restarted there: O(n) work in all.
+        (0, 0.25, 0.5, 1, 2, ... s after the first fix or range: before
+        it nothing can pin the heading), and the ISAM2 restarted there: O(n) work in all. A
+        divergence watch that trips meanwhile re-solves from the prior too.
 
         ``closing``: the first segment is about to be handed over at keyframe
         k (kept open until settled, at most FIRST_SEGMENT_CAP segment
@@ -849,11 +903,13 @@ class ISAM2Runner(_Runner):
         if self.segments or self.seg_start != 0 or self._settled:
             return
         kf = self.prob.kf
-        age = kf.t[k] - kf.t[0]
+        # The ages count from the first fix or range: before it nothing can pin the heading.
+        first = [int(a[0]) for a in (kf.gps_k, kf.rng_k) if len(a)]
+        age = kf.t[k] - kf.t[min(first)] if first else -np.inf
         if age < self._settle_next and not closing:
             return
         if not (closing and self._settled_at == k):       # not re-solved at this keyframe already
-            self._settle_next = 2.0 * max(age, 1.0)
+            self._settle_next = 2.0 * max(age, SETTLE_FIRST)
             self.recover(k, 0)
             self._settled_at = k
             self.settles += 1
@@ -892,6 +948,8 @@ class ISAM2Runner(_Runner):
 
     # ------------------------------------------------------------ recovery
     def _recovery_start(self, k: int, j: int) -> int:
+        if not self._settled and not self.segments and self.seg_start == 0:
+            return 0              # an unsettled start is re-solved whole, from its prior (_settle_start)
         return max(self.seg_start, min(j, k - 1))
 
     def _seed(self):
@@ -924,8 +982,11 @@ class ISAM2Runner(_Runner):
                                   "W": self.W[self.seg_start:j0 + 1].copy()})
             self.seg_start = j0
         seed_factors, seed_values, prior = self._seed()
-        pose, W, _ = solve_window(self.prob, self.pose, self.W, j0, k, prior)
-        self.pose[j0:k + 1], self.W[j0:k + 1] = pose[j0:k + 1], W[j0:k + 1]
+        if prior is None and j0 == 0:
+            self._solve_start(k)
+        else:
+            pose, W, _ = solve_window(self.prob, self.pose, self.W, j0, k, prior)
+            self.pose[j0:k + 1], self.W[j0:k + 1] = pose[j0:k + 1], W[j0:k + 1]
         graph = gtsam.NonlinearFactorGraph()
         graph.push_back(seed_factors)
         values = gtsam.Values()
@@ -1136,6 +1197,10 @@ class FixedLagRunner(_Runner):
         self.Sig = np.zeros((self.prob.kf.n, NB, NB))
         self.linear_index: dict[int, list[int]] = {}
         self._relin_next = 0
+        # A start whose heading the prior barely knows: held in the window until settled (_settle_start).
+        self._settled = float(np.sqrt(self.prob.prior_cov[2, 2])) <= SETTLE_HEADING
+        self._settle_next, self.settles = 0.0, 0
+        self.settle_notes: list[str] = []
         self._update(factors, values, [0])
 
     def _update(self, factors, values, keyframes, remove=(), stamp: dict[int, float] | None = None):
@@ -1169,6 +1234,8 @@ class FixedLagRunner(_Runner):
 
     def _recovery_start(self, k: int, j: int) -> int:
         first = int(np.argmin(self.done[:k])) if not self.done[:k].all() else k
+        if not self._settled:
+            return first          # a held start is re-solved whole, from its prior (_settle_start)
         return max(first, min(j, k - 1))
 
     def recover(self, k: int, j0: int) -> None:
@@ -1182,18 +1249,23 @@ class FixedLagRunner(_Runner):
                 self._harvest(int(j), est)
             else:
                 self._store(int(j), est)
-        isam = self.smoother.getISAM2()
-        cov = _joint_marginal(isam, j0)
-        vals = gtsam.Values()
-        vals.insert(X_KEY(j0), est.atPose2(X_KEY(j0)))
-        vals.insert(W_KEY(j0), est.atVector(W_KEY(j0)))
-        vals.insert(S_KEY(j0), est.atVector(S_KEY(j0)))
-        p0, w0 = _block_values(vals)
-        cov_block = _to_block(cov)
-        L = _cov_whitener(cov_block)
-        pose, W, _ = solve_window(self.prob, self.pose, self.W, j0, k, (p0, w0, L))
-        self.pose[j0:k + 1], self.W[j0:k + 1] = pose[j0:k + 1], W[j0:k + 1]
-        graph = ISAM2Runner._information_factor(vals, np.linalg.inv(cov), np.zeros(11))
+        if j0 == 0:
+            # Nothing has left the window: the problem's own prior (the window's
+            # marginal at keyframe 0 would count every factor since twice).
+            self._solve_start(k)
+            graph = self.graph.prior_factors(self.pose, self.W)
+        else:
+            isam = self.smoother.getISAM2()
+            cov = _joint_marginal(isam, j0)
+            vals = gtsam.Values()
+            vals.insert(X_KEY(j0), est.atPose2(X_KEY(j0)))
+            vals.insert(W_KEY(j0), est.atVector(W_KEY(j0)))
+            vals.insert(S_KEY(j0), est.atVector(S_KEY(j0)))
+            p0, w0 = _block_values(vals)
+            L = _cov_whitener(_to_block(cov))
+            pose, W, _ = solve_window(self.prob, self.pose, self.W, j0, k, (p0, w0, L))
+            self.pose[j0:k + 1], self.W[j0:k + 1] = pose[j0:k + 1], W[j0:k + 1]
+            graph = ISAM2Runner._information_factor(vals, np.linalg.inv(cov), np.zeros(11))
         values = gtsam.Values()
         for i in range(j0, k + 1):
             values.insert(self.graph.values(i, self.pose, self.W))
@@ -1217,10 +1289,16 @@ class FixedLagRunner(_Runner):
         # sigma of 2.7 km and 18708 rad). It is filed just inside the
         # window instead, and leaves at the next update.
         keep = {}
-        if kf.t[k - 1] < kf.t[k] - self.options.lag:
+        edge = kf.t[k] - self.options.lag
+        if kf.t[k - 1] < edge:
             keep[k - 1] = float(kf.t[k]) - self.options.lag + 1e-6 * self.options.lag
-        leaving = [j for j in np.nonzero(~self.done[:k - 1] & (kf.t[:k - 1] < kf.t[k] - self.options.lag))[0]
-                   if self.filed_late.get(int(j), -np.inf) < kf.t[k] - self.options.lag]
+        if not self._settled:
+            # The start is held: every keyframe about to leave is filed at t_k (_settle_start).
+            for j in np.nonzero(~self.done[:k] & (kf.t[:k] < edge + 1e-6 * self.options.lag))[0]:
+                if self.filed_late.get(int(j), -np.inf) < edge + 1e-6 * self.options.lag:
+                    keep[int(j)] = float(kf.t[k])
+        leaving = [j for j in np.nonzero(~self.done[:k - 1] & (kf.t[:k - 1] < edge))[0]
+                   if int(j) not in keep and self.filed_late.get(int(j), -np.inf) < edge]
         if leaving:
             est = self.smoother.calculateEstimate()
             for j in leaving:
@@ -1265,17 +1343,74 @@ class FixedLagRunner(_Runner):
         for i in range(min(self._relin_next, lo, k - 1), k + 1):
             if not self.done[i]:
                 self._store(i, est)
+        if not self._settled:
+            self._settle_start(k)
+
+    def _settle_start(self, k: int, closing: bool = False) -> None:
+        """A start whose heading the prior barely knows (sigma above
+        SETTLE_HEADING: a consensus fit on few or weak fixes, or a first fix
+        long after the start), as ISAM2Runner._settle_start: a window that
+        marginalises keyframes linearised at a heading that was a guess
+        freezes that guess, and every row after it inherits it (a probe: the
+        first fix 35 s after the start, rows 2.8 rad and 5 m off at sigma
+        0.2 rad and 0.5 m, status ok). So until the heading is known, no
+        keyframe leaves the window (step files it at t_k); the held window is
+        re-solved from the prior (Gauss-Newton, as a recovery) at doubling
+        ages (0, 0.25, 0.5, 1, ... s after the first fix or range) and the smoother
+        restarted there (a divergence watch that trips meanwhile does the
+        same), until the
+        newest keyframe's heading sigma is below SETTLE_HEADING_DONE. The
+        hold ends at HOLD_CAP seconds whatever the heading (memory), and that
+        is said. ``closing``: the log ends at keyframe k, re-solved once more
+        whatever its age."""
+        kf = self.prob.kf
+        capped = kf.t[k] - kf.t[0] >= HOLD_CAP
+        # The ages count from the first fix or range: before it nothing can pin the heading.
+        first = [int(a[0]) for a in (kf.gps_k, kf.rng_k) if len(a)]
+        age = kf.t[k] - kf.t[min(first)] if first else -np.inf
+        if age < self._settle_next and not (capped or closing):
+            return
+        self._settle_next = 2.0 * max(age, SETTLE_FIRST)
+        self.recover(k, int(np.argmin(self.done[:k + 1])) if not self.done[:k + 1].all() else k)
+        self.settles += 1
+        sig = float(np.sqrt(max(self.smoother.marginalCovariance(X_KEY(k))[2, 2], 0.0)))
+        if sig < SETTLE_HEADING_DONE:
+            self._settled = True
+            self.settle_notes.append(
+                f"fixed-lag: the start's heading was uncertain (prior sigma "
+                f"{np.degrees(np.sqrt(self.prob.prior_cov[2, 2])):.0f} deg): the window held every keyframe until "
+                f"t={kf.t[k]:.1f} s, when {self.settles} re-solve(s) from the start had pinned it "
+                f"(sigma {np.degrees(sig):.1f} deg)")
+        elif closing:
+            self._settled = True
+            self.settle_notes.append(
+                f"fixed-lag: the start's heading was never pinned (sigma {np.degrees(sig):.1f} deg at the end): "
+                f"the window held every keyframe to the end, and the rows are a re-solve of the whole log")
+        elif capped:
+            self._settled = True
+            self.settle_notes.append(
+                f"fixed-lag: the start's heading was still uncertain (sigma {np.degrees(sig):.1f} deg, settled at "
+                f"{np.degrees(SETTLE_HEADING_DONE):.1f}) when the window stopped holding at t={kf.t[k]:.1f} s "
+                f"({HOLD_CAP:g} s): the rows after it rest on linearisations at a heading the data had not pinned "
+                "(an [initial] pose in robot.toml, or --method batch, avoids this)")
+
+    def end_hold(self) -> None:
+        """The log ends: a start still held is re-solved once more, and its rows are that re-solve's."""
+        if not self._settled:
+            self._settle_start(self.prob.kf.n - 1, closing=True)
 
     def finish(self, wall0: float) -> Estimate:
+        self.end_hold()
         est = self.smoother.calculateEstimate()
         for j in np.nonzero(~self.done)[0]:
             self._harvest(int(j), est)
         # Window marginals are per variable: the cross-covariance of X, W and S
         # of one keyframe is not available, so pose sigma at the row time
         # ignores it (it is second order for the pose).
-        return self._estimate(self.Sig, wall0, [f"fixed-lag: {self.prob.kf.n} keyframes at "
-                                                f"{self.options.keyframe_hz:g} Hz, lag {self.options.lag:g} s"],
-                              causal_lag=self.options.lag)
+        warn = [w for w in self.settle_notes if "still uncertain" in w]
+        notes = [f"fixed-lag: {self.prob.kf.n} keyframes at {self.options.keyframe_hz:g} Hz, lag "
+                 f"{self.options.lag:g} s"] + [w for w in self.settle_notes if w not in warn]
+        return self._estimate(self.Sig, wall0, notes, causal_lag=self.options.lag, warnings=warn)
 
 
 def run_isam2(log: Log, schedule: Schedule = Schedule(), options: IncrementalOptions = IncrementalOptions(),

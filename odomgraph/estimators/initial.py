@@ -318,9 +318,15 @@ def consensus_pose(tw, ml, mr, dtw, track, ft, fp, fs, lever, scale_sigma: float
     back_th = scale_sigma * float(np.interp(ft[0], t_dr, turned)) + \
         np.sqrt(2.0) * scale_sigma * float(np.interp(ft[0], t_dr, travel)) / track
     if not spread >= max(3.0 * float(np.median(W_s)), 0.05) or m < 2:
-        # The antenna hardly moved: position from the median fix, heading unknown.
+        # The antenna hardly moved: position from the median fix, heading
+        # unknown. The start lies on the circle around it whose radius is the
+        # wheels' antenna at the first fix, seen from the start: the lever arm
+        # standing still, but the whole path driven when the first fix came
+        # late (a stream's warm-up with one fix 35 s in took the lever arm's
+        # 0.3 m for a start 17 m away, and isam2 bent its scale factors 12
+        # sigma to join them).
         med = np.median(W_p, 0)
-        s_p = float(np.hypot(np.median(W_s), np.hypot(*lever))) + back
+        s_p = float(np.hypot(np.median(W_s), max(np.hypot(*lever), float(np.hypot(*d[0]))))) + back
         pose = np.array([med[0], med[1], 0.0])
         return ConsensusFit(pose, np.diag([s_p**2, s_p**2, np.pi**2]), m, 0,
                             f"position from the median of {m} fixes; heading not observable from the first motion "
