@@ -146,7 +146,8 @@ def summary_lines(online: Online, st: StreamStats) -> list[str]:
     if s["recoveries"]:
         out.append(f"stream: {len(s['recoveries'])} recoveries (said above as they happened)")
     if s["restarts"]:
-        out.append(f"stream: {len(s['restarts'])} restarts after a divergence (said above)")
+        out.append(f"stream: {len(s['restarts'])} restart(s), after a divergence or to take up the fixes' frame "
+                   "(said above)")
     out += [f"warning: {w}" for w in s["warnings"]]
     out += [f"flag: {f}" for f in s["flags"]]
     return out

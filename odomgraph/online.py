@@ -182,6 +182,7 @@ class Online:
 
     # (an EKF checkpoint pickled before these existed loads without them)
     _frame_free = False
+    _placed_by: frozenset = frozenset()     # the absolute sensors a frame-free run had (_frame_check)
     _revised = None
     _rev_prev = None
 
@@ -465,7 +466,14 @@ class Online:
             self._restart(exc)
             return []
 
-    def _anchor(self) -> list[OnlineRow]:
+    def _frame_check(self, init, log: Log) -> None:
+        """A run that starts in the wheels' own frame (initial.InitialState
+        .frame_free) waits for an absolute sensor it did not have (_anchor)."""
+        if init.frame_free:
+            self._frame_free = True
+            self._placed_by = {name for name in ("gps", "ranges") if getattr(log, name) is not None}
+
+    def _anchor(self) -> None:
         """The first fix or range came after the estimator had started in the
         start's own frame (no absolute measurement in the warm-up, no
         [initial] pose): nothing ties that frame to theirs, and an estimator
@@ -475,14 +483,14 @@ class Online:
         fresh start: a warm-up that fits the start to the fixes. The rows so
         far stay in the start's own frame, and the restart says so."""
         from odomgraph.errors import OdomgraphError
-        firsts = [(rows[0][0], name) for name, rows in self._raw.items() if name in ("gps", "ranges") and rows]
+        firsts = [(rows[0][0], name) for name, rows in self._raw.items()
+                  if name in ("gps", "ranges") and name not in self._placed_by and rows]
         t_abs, name = min(firsts)
         self._frame_free = False
         self._restart(OdomgraphError(
             f"the first {'GPS fix' if name == 'gps' else 'range'} came at t={t_abs:.2f} s, after the estimator had "
             "started without any absolute measurement or [initial] pose: the rows before are in the start's own "
             "frame (the origin, heading 0), not theirs"), anchor=True)
-        return []
 
     def _restart(self, exc: Exception, anchor: bool = False) -> None:
         """The estimator diverged beyond its own recoveries: a robot still
@@ -499,7 +507,10 @@ class Online:
         # from the failing event on (the rows of the chunk that failed are the diverging ones)
         t_r = max(self.last.t if self.last is not None else self.t_first, self._fail_t or -math.inf)
         if anchor:
-            self.robot = self.robot.with_(initial=None)
+            # a fresh start: robot.toml and the schedule as given, no row to go on from
+            self.robot = self._args["robot"].with_(initial=None)
+            self.schedule = self._args["schedule"]
+            self._base = np.ones(3)
         elif self.last is not None:
             x, y, th = (float(v) for v in self.last.mean[:3])
             sx, sy, sth = (float(v) for v in self.last.sigma[:3])
@@ -538,6 +549,8 @@ class Online:
         self.t_first = min(firsts) if firsts else None
         self.ekf = self.smoother = None
         self._rev_prev = None            # a new run's rows are not judged against the last one's
+        if anchor:
+            self.last = None             # (estimate() gives no row of the old frame, nor does a later restart)
         self._settle_said = 0            # the new runner's settle warnings start from none
         self.t_done = -math.inf
         self.restarts.append(f"t={t_r:.2f} s: {' '.join(str(exc).split())}; " + (
@@ -572,8 +585,11 @@ class Online:
             b = self._final_before(SPIKE_HALF)
         else:
             b = self._final_before()
-        if self._frame_free and (self._raw["gps"] or self._raw["ranges"]):
-            return self._anchor()
+        if self._frame_free and any(self._raw[name] for name in ("gps", "ranges") if name not in self._placed_by):
+            self._anchor()
+            if not final:
+                return []
+            return self._advance_once(final)     # closing: the rest of the stream in the new frame
         if self.smoother is not None:
             out = self.smoother.feed(self, b, final)
             said = getattr(self.smoother.runner, "settle_warnings", [])   # isam2's start heading (incremental.py)
@@ -628,8 +644,6 @@ class Online:
     def _start(self, final: bool = False) -> None:
         """Warm-up done: the whole-log decisions on the rows so far (see the module doc)."""
         log = self._log(-math.inf)
-        self._frame_free = self._frame_free or (self.robot.initial is None and log.gps is None
-                                                and log.ranges is None)
         wheel = log.encoders if log.encoders is not None else log.wheel_speeds
         if wheel is None or len(wheel.t) < 3:
             from odomgraph.errors import NotEnoughDataError
@@ -638,8 +652,10 @@ class Online:
                                      "from")
         if self.method is not Method.ekf:
             self.smoother = _Smoother(self, log, final)
+            self._frame_check(self.smoother.runner.prob.init, log)
             return
         self.ekf = EKF(log, self.schedule, self.options)
+        self._frame_check(self.ekf.init, log)
         self.ekf.begin()
         self.t_done = self.ekf.init.t
         self.notes.append(self.ekf.init.note)
@@ -940,7 +956,7 @@ class _Smoother:
         from odomgraph.estimators.heading import widen_rows
         sig = row.sigma[None].copy()
         pc = None if row.pose_cov is None else row.pose_cov[None].copy()
-        widen_rows(np.array([row.t]), sig, pc, until, self.watch)
+        widen_rows(np.array([row.t]), sig, pc, until, self.watch, row.mean[None])
         return dc_replace(row, sigma=sig[0], pose_cov=None if pc is None else pc[0])
 
     def _online_row(self, k: int, online: Online) -> OnlineRow:

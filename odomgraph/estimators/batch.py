@@ -699,10 +699,10 @@ def smoother_estimate(prob: Problem, schedule: Schedule, pose: np.ndarray, W: np
             mine = np.inf if until == np.inf else -np.inf
         else:
             mine = until - causal_lag
-        n = heading.widen_rows(rows.t, rows.sigma, rows.pose_cov, mine, watch)
+        n = heading.widen_rows(rows.t, rows.sigma, rows.pose_cov, mine, watch, rows.mean)
         if extra.get("online") is not None:
             o = extra["online"]
-            n += heading.widen_rows(o.t, o.sigma, o.pose_cov, until, watch)
+            n += heading.widen_rows(o.t, o.sigma, o.pose_cov, until, watch, o.mean)
         if n:
             warnings = list(warnings) + [heading.warning(until, prob.meas.t_start, watch)]
     from odomgraph.estimators import gaps

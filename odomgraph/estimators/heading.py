@@ -96,12 +96,16 @@ class HeadingWatch:
         self._record_on = bool(record)
         self._hist_t: list[float] = []
         self._hist_arm: list[float] = []
+        # the fixes' world positions summed, and their mean at each history entry (centre_at)
+        self._xy_sum = np.zeros(2)
+        self._hist_c: list[tuple[float, float]] = []
 
     def __setstate__(self, state: dict) -> None:
         # a checkpoint written before the circle (odomgraph.online) has none of it
         self.__dict__.update(state)
         for name, value in (("_a_sum", np.zeros(2)), ("_n_fix", 0), ("_record_on", True), ("_hist_t", []),
-                            ("_hist_arm", []), ("t_wheels", math.inf), ("t_first_fix", math.inf)):
+                            ("_hist_arm", []), ("t_wheels", math.inf), ("t_first_fix", math.inf), ("_xy_sum", np.zeros(2)),
+                            ("_hist_c", [])):
             self.__dict__.setdefault(name, value)
 
     @property
@@ -143,14 +147,30 @@ class HeadingWatch:
         vals = np.concatenate([[lever], self._hist_arm])
         return vals[i + 1]
 
+    def centre_at(self, t) -> np.ndarray:
+        """(N, 2) the mean of the fixes [m, world frame] as it was at times t
+        (N,) [s] (the last history entry at or before each); NaN before the
+        first fix or without the history."""
+        t = np.atleast_1d(np.asarray(t, float))
+        out = np.full((t.size, 2), np.nan)
+        if len(self._hist_c) != len(self._hist_t) or not self._hist_t:
+            return out
+        i = np.searchsorted(np.asarray(self._hist_t), t, side="right") - 1
+        c = np.asarray(self._hist_c, float)
+        ok = i >= 0
+        out[ok] = c[i[ok]]
+        return out
+
     def _record(self, t: float) -> None:
         if not self._record_on:
             return
         a = self.arm()
-        if self._hist_arm and abs(a - self._hist_arm[-1]) < 1e-3:
+        c = (tuple(self._xy_sum / self._n_fix) if self._n_fix else (math.nan, math.nan))
+        if self._hist_arm and abs(a - self._hist_arm[-1]) < 1e-3 and (not self._n_fix or c == self._hist_c[-1]):
             return                        # standing still: the history stays one entry, not one per event
         self._hist_t.append(float(t))
         self._hist_arm.append(a)
+        self._hist_c.append(c)
 
     def wheel(self, t: float, v_left: float, v_right: float, dt: float) -> None:
         if self.known:
@@ -168,6 +188,7 @@ class HeadingWatch:
         if self.known:
             return
         self._a_sum += self._antenna()
+        self._xy_sum += np.asarray(xy, float)[:2]
         self._n_fix += 1
         self.t_first_fix = min(self.t_first_fix, float(t))
         self._record(t)
@@ -218,17 +239,27 @@ def watch_log(meas, robot) -> HeadingWatch:
     return hw
 
 
-def widen_rows(t: np.ndarray, sigma: np.ndarray, pose_cov: np.ndarray | None, until: float, watch) -> int:
+def widen_rows(t: np.ndarray, sigma: np.ndarray, pose_cov: np.ndarray | None, until: float, watch,
+               mean: np.ndarray | None = None) -> int:
     """Rows before ``until`` [s] (t (N,), sigma (N, 11), pose_cov (N, 3, 3) or
     None, in place): heading sigma at least pi, and x, y widened by the
     circle the centre lies on at each row's time (circle_variance of
     ``watch.arm_at(t)``, a HeadingWatch fed at least that far) on top of what
-    they had. Returns the number of rows widened."""
+    they had. With the rows' ``mean`` (N, 11), the circle is at least as wide
+    as the row's own distance from the fixes' mean then (watch.centre_at): an
+    estimate linearised at a heading that was a guess need not lie on the
+    wheels' circle (a probe: isam2's causal rows on 10 m fixes at 0.2 Hz 47 m
+    off at sigma 7-10 m, the circle 10-14 m). Returns the number of rows
+    widened."""
     sel = np.asarray(t) < until
     n = int(sel.sum())
     if not n:
         return 0
-    add_pose_variance(sigma, pose_cov, sel, circle_variance(watch.arm_at(np.asarray(t)[sel])))
+    radius = watch.arm_at(np.asarray(t)[sel])
+    if mean is not None:
+        d = np.hypot(*(np.asarray(mean)[sel, 0:2] - watch.centre_at(np.asarray(t)[sel])).T)
+        radius = np.where(np.isfinite(d), np.maximum(radius, d), radius)
+    add_pose_variance(sigma, pose_cov, sel, circle_variance(radius))
     sigma[sel, 2] = np.maximum(sigma[sel, 2], math.pi)
     if pose_cov is not None:
         pc = pose_cov[sel]

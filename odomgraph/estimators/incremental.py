@@ -46,6 +46,7 @@ from odomgraph.errors import EstimatorDivergedError
 from odomgraph.estimators.batch import (HELD_SIGMA, GraphOptions, build_problem, factor_arrays, marginal_blocks,
                                         retract, smoother_estimate, solve_window)
 from odomgraph.estimators.graph import NB, Problem, linearize, slip_prior_rows, walk_rows
+from odomgraph.estimators.heading import circle_variance
 from odomgraph.estimators.measurements import PAUSE_S
 from odomgraph.result import Estimate
 from odomgraph.estimators.schedule import Schedule
@@ -141,7 +142,7 @@ class _Graph:
         self.gated: dict[str, int] = {}
         # interval -> its slip in wheel-speed units where its slip prior was last linearised
         self.slip_at: dict[int, np.ndarray] = {}
-        # The runner's start is unsettled (ISAM2Runner._settle_start): no gate. Its
+        # The runner's start is unsettled (its _settle_start, both runners): no gate. Its
         # prediction is as unsure as the start's heading, and a gate that reads
         # only the fix's own sigma refused the fixes that settle it (a first fix
         # 35 s in: 15 gated, causal rows 6 m off at sigma 0.3 m).
@@ -403,6 +404,8 @@ class _Runner:
     """The shared loop; subclasses hold the GTSAM engine."""
 
     method = ""
+    #: The start's heading is known well enough (ISAM2Runner / FixedLagRunner._settle_start).
+    _settled = True
     #: Arrays with one row per keyframe (``_grow`` makes room as a stream adds keyframes).
     per_keyframe = ("pose", "W", "update_times")
 
@@ -458,16 +461,20 @@ class _Runner:
         pause of a day: a row 466 m off at a sigma of 2.8 m)."""
         kf = self.prob.kf
         if kf.dt[k - 1] > PAUSE_S:
-            w = self.W[k - 1]
-            kl, kr, kb = w[St.W_SCALE]
-            ul, ur = kf.enc_m[k - 1, 0] / kl, kf.enc_m[k - 1, 1] / kr
-            w[St.W_VEL] = 0.5 * (ul + ur), (ur - ul) / (kb * self.prob.robot.track_width)
-            w[St.W_SLIP] = 0.0
+            self._wheel_velocity(self.W[k - 1], k - 1)
         x, y, th = self.pose[k - 1]
         p, _ = bend(*propagate(x, y, th, self.W[k - 1, 0], self.W[k - 1, 1], kf.dt[k - 1]), x, y, th,
                     None if kf.trans_bend is None else kf.trans_bend[k - 1], self.W[k - 1, 1])
         self.pose[k] = [p[0], p[1], wrap_angle(p[2])]
         self.W[k] = self.W[k - 1]
+
+    def _wheel_velocity(self, w: np.ndarray, j: int) -> None:
+        """W row w (8,), in place: interval j's velocities from its wheels at
+        w's scale factors, no slip."""
+        kl, kr, kb = w[St.W_SCALE]
+        ul, ur = self.prob.kf.enc_m[j, 0] / kl, self.prob.kf.enc_m[j, 1] / kr
+        w[St.W_VEL] = 0.5 * (ul + ur), (ur - ul) / (kb * self.prob.robot.track_width)
+        w[St.W_SLIP] = 0.0
 
     def _store(self, k: int, values) -> None:
         p = values.atPose2(X_KEY(k))
@@ -515,12 +522,9 @@ class _Runner:
         kf, prior = self.prob.kf, self.prob.prior_mean
         pose, W = self.pose.copy(), self.W.copy()
         pose[0], W[0] = prior[0:3], prior[3:]
-        kl, kr, kb = prior[3:][St.W_SCALE]
         for j in range(k):
-            w = W[0].copy()
-            ul, ur = kf.enc_m[j, 0] / kl, kf.enc_m[j, 1] / kr
-            w[St.W_VEL] = 0.5 * (ul + ur), (ur - ul) / (kb * self.prob.robot.track_width)
-            w[St.W_SLIP] = 0.0
+            w = prior[3:].copy()
+            self._wheel_velocity(w, j)
             W[j] = w
             x, y, th = pose[j]
             p, _ = bend(*propagate(x, y, th, w[0], w[1], kf.dt[j]), x, y, th,
@@ -528,6 +532,15 @@ class _Runner:
             pose[j + 1] = [p[0], p[1], wrap_angle(p[2])]
             W[j + 1] = w
         return pose, W
+
+    def _absolute_age(self, k: int) -> float:
+        """Time [s] from the first keyframe whose graph holds a fix or range
+        to keyframe k (-inf before it): the settles' clock, since nothing
+        before it can pin the heading. A fix in interval g enters the graph
+        with keyframe g + 1 (advance)."""
+        kf = self.prob.kf
+        first = [int(a[0]) + 1 for a in (kf.gps_k, kf.rng_k) if len(a) and int(a[0]) < k]
+        return float(kf.t[k] - kf.t[min(first)]) if first else -np.inf
 
     def _solve_start(self, k: int) -> None:
         """Keyframes 0..k re-solved from the problem's prior (batch.solve_window)
@@ -540,7 +553,10 @@ class _Runner:
         start the first fixes fitted (initial.consensus_pose) ends on them."""
         best = None
         for p0, w0 in ((self.pose, self.W), self._wheels_path(k)):
-            pose, W, _ = solve_window(self.prob, p0, w0, 0, k, None)
+            try:
+                pose, W, _ = solve_window(self.prob, p0, w0, 0, k, None)
+            except EstimatorDivergedError:
+                continue                  # the other start may still do
             cost = float(linearize(self.prob, pose, W, 0, k).cost)
             if np.isfinite(cost) and (best is None or cost < best[0]):
                 best = (cost, pose, W)
@@ -761,7 +777,8 @@ SETTLE_FIRST = 0.125
 #: heading is unsettled (memory grows by as much, once).
 FIRST_SEGMENT_CAP = 4.0
 #: fixed-lag holds an unsettled start in its window for at most this long [s]
-#: (FixedLagRunner._settle_start; memory grows by as much, once).
+#: after the first fix or range (FixedLagRunner._settle_start; memory grows by
+#: as much, once, plus the stretch before the first fix).
 HOLD_CAP = 300.0
 
 #: ISAM2 boundary tangent order (X 3, W_KEY 6, S_KEY 2) -> keyframe block order (graph.py).
@@ -903,9 +920,7 @@ class ISAM2Runner(_Runner):
         if self.segments or self.seg_start != 0 or self._settled:
             return
         kf = self.prob.kf
-        # The ages count from the first fix or range: before it nothing can pin the heading.
-        first = [int(a[0]) for a in (kf.gps_k, kf.rng_k) if len(a)]
-        age = kf.t[k] - kf.t[min(first)] if first else -np.inf
+        age = self._absolute_age(k)
         if age < self._settle_next and not closing:
             return
         if not (closing and self._settled_at == k):       # not re-solved at this keyframe already
@@ -945,6 +960,15 @@ class ISAM2Runner(_Runner):
         self.online_sigma[k, 0:3] = np.sqrt(np.maximum(np.diag(Pp), 0))
         self.online_sigma[k, [3, 4, 5, 8, 9, 10]] = np.sqrt(np.maximum(np.diag(Pw), 0))
         self.online_sigma[k, [6, 7]] = np.sqrt(np.maximum(np.diag(Ps), 0))
+        if not self._settled and self.online_sigma[k, 2] > SETTLE_HEADING:
+            # A heading this unsure is past what a linearisation carries: the
+            # row lies on a circle about the fix-pinned antenna, of the lever
+            # arm plus the interval's travel (the first row after a first fix
+            # 35 s in: 0.4 m off at sigma 0.05 m, z 8).
+            r = self.prob.robot
+            lever = r.gps_lever_arm if len(kf.gps_k) else r.range_lever_arm
+            radius = float(np.hypot(*lever)) + abs(float(self.W[k - 1, 0])) * float(kf.dt[k - 1])
+            self.online_sigma[k, 0:2] = np.sqrt(self.online_sigma[k, 0:2] ** 2 + circle_variance(radius))
 
     # ------------------------------------------------------------ recovery
     def _recovery_start(self, k: int, j: int) -> int:
@@ -1201,6 +1225,7 @@ class FixedLagRunner(_Runner):
         self._settled = float(np.sqrt(self.prob.prior_cov[2, 2])) <= SETTLE_HEADING
         self._settle_next, self.settles = 0.0, 0
         self.settle_notes: list[str] = []
+        self.settle_warnings: list[str] = []     # the hold ended at HOLD_CAP unsettled (a stream alerts them)
         self._update(factors, values, [0])
 
     def _update(self, factors, values, keyframes, remove=(), stamp: dict[int, float] | None = None):
@@ -1227,6 +1252,7 @@ class FixedLagRunner(_Runner):
             Sig[np.ix_(S_COLS, S_COLS)] = self.smoother.marginalCovariance(S_KEY(k))
             self.Sig[k] = Sig
         self.done[k] = True
+        self.filed_late.pop(k, None)
         # Its factors leave with it: no index of them may be removed later (their slots are reused),
         # and an unbounded stream keeps nothing per keyframe it no longer needs.
         self.linear_index.pop(k, None)
@@ -1241,8 +1267,9 @@ class FixedLagRunner(_Runner):
     def recover(self, k: int, j0: int) -> None:
         """Re-solve keyframes j0..k, the part of the window the watch looks
         back on (as ISAM2Runner.recover), and restart the smoother at j0 with
-        its marginal there and every factor since linearised at the solution.
-        Older keyframes still in the window are harvested first."""
+        its marginal there (j0 = 0: the problem's prior, _solve_start) and
+        every factor since linearised at the solution. Older keyframes still
+        in the window are harvested first."""
         est = self.smoother.calculateEstimate()
         for j in np.flatnonzero(~self.done[:k + 1]):
             if j < j0:
@@ -1356,18 +1383,18 @@ class FixedLagRunner(_Runner):
         0.2 rad and 0.5 m, status ok). So until the heading is known, no
         keyframe leaves the window (step files it at t_k); the held window is
         re-solved from the prior (Gauss-Newton, as a recovery) at doubling
-        ages (0, 0.25, 0.5, 1, ... s after the first fix or range) and the smoother
-        restarted there (a divergence watch that trips meanwhile does the
-        same), until the
-        newest keyframe's heading sigma is below SETTLE_HEADING_DONE. The
+        ages (0, 0.25, 0.5, 1, ... s after the first fix or range is in the
+        graph: _absolute_age) and the smoother restarted there (a divergence
+        watch that trips meanwhile does the same), until the newest
+        keyframe's heading sigma is below SETTLE_HEADING_DONE. The
         hold ends at HOLD_CAP seconds whatever the heading (memory), and that
         is said. ``closing``: the log ends at keyframe k, re-solved once more
         whatever its age."""
         kf = self.prob.kf
-        capped = kf.t[k] - kf.t[0] >= HOLD_CAP
-        # The ages count from the first fix or range: before it nothing can pin the heading.
-        first = [int(a[0]) for a in (kf.gps_k, kf.rng_k) if len(a)]
-        age = kf.t[k] - kf.t[min(first)] if first else -np.inf
+        age = self._absolute_age(k)
+        # (before the first fix or range nothing is capped: a prior this unsure
+        # comes only from a fit to fixes that are yet to come)
+        capped = age >= HOLD_CAP
         if age < self._settle_next and not (capped or closing):
             return
         self._settle_next = 2.0 * max(age, SETTLE_FIRST)
@@ -1388,10 +1415,10 @@ class FixedLagRunner(_Runner):
                 f"the window held every keyframe to the end, and the rows are a re-solve of the whole log")
         elif capped:
             self._settled = True
-            self.settle_notes.append(
-                f"fixed-lag: the start's heading was still uncertain (sigma {np.degrees(sig):.1f} deg, settled at "
-                f"{np.degrees(SETTLE_HEADING_DONE):.1f}) when the window stopped holding at t={kf.t[k]:.1f} s "
-                f"({HOLD_CAP:g} s): the rows after it rest on linearisations at a heading the data had not pinned "
+            self.settle_warnings.append(
+                f"fixed-lag: the start's heading was still uncertain (sigma {np.degrees(sig):.1f} deg; it counts as "
+                f"pinned below {np.degrees(SETTLE_HEADING_DONE):.1f} deg) when the window stopped holding at t={kf.t[k]:.1f} s "
+                f"({HOLD_CAP:g} s after the first fix or range): the rows after it rest on linearisations at a heading the data had not pinned "
                 "(an [initial] pose in robot.toml, or --method batch, avoids this)")
 
     def end_hold(self) -> None:
@@ -1407,10 +1434,12 @@ class FixedLagRunner(_Runner):
         # Window marginals are per variable: the cross-covariance of X, W and S
         # of one keyframe is not available, so pose sigma at the row time
         # ignores it (it is second order for the pose).
-        warn = [w for w in self.settle_notes if "still uncertain" in w]
         notes = [f"fixed-lag: {self.prob.kf.n} keyframes at {self.options.keyframe_hz:g} Hz, lag "
-                 f"{self.options.lag:g} s"] + [w for w in self.settle_notes if w not in warn]
-        return self._estimate(self.Sig, wall0, notes, causal_lag=self.options.lag, warnings=warn)
+                 f"{self.options.lag:g} s"] + self.settle_notes
+        flags = (["fixed-lag: the window stopped holding with the start heading still uncertain (warnings)"]
+                 if self.settle_warnings else [])
+        return self._estimate(self.Sig, wall0, notes, causal_lag=self.options.lag, warnings=self.settle_warnings,
+                              flags=flags)
 
 
 def run_isam2(log: Log, schedule: Schedule = Schedule(), options: IncrementalOptions = IncrementalOptions(),

@@ -49,6 +49,10 @@ class InitialState:
     """The start's heading is unknown (the first fixes show no motion; sigma
     pi): until the motion shows it (estimators.heading), no estimator may
     claim one."""
+    frame_free: bool = False
+    """No absolute measurement placed the start: it is the origin, heading 0,
+    the wheels' own frame (a stream starts again in the fixes' frame when
+    they come: online.Online._anchor)."""
 
 
 def _wheel_rates(robot: RobotConfig, meas: Measurements):
@@ -111,7 +115,7 @@ def initial_state(robot: RobotConfig, meas: Measurements, pin: dict[str, str] | 
     P[np.ix_(S.SCALE, S.SCALE)] = prior_scale_cov(obs, pn.initial_scale_sigma)
     tw, vw, ww = _wheel_rates(robot, meas)
 
-    def finish(t0, pose, pose_cov, note, warnings=(), heading_unknown=False):
+    def finish(t0, pose, pose_cov, note, warnings=(), heading_unknown=False, frame_free=False):
         if np.sum(tw >= t0) < 2:
             raise NotEnoughDataError(f"fewer than two wheel measurements after the estimator's start at "
                                      f"t={t0:.6g} s ({note}); the wheel odometry ends at t={tw[-1]:.6g} s")
@@ -125,7 +129,8 @@ def initial_state(robot: RobotConfig, meas: Measurements, pin: dict[str, str] | 
         P[S.OMEGA, S.OMEGA] = (0.2 + 0.1 * abs(ww[k])) ** 2
         P[np.ix_(S.POSE, S.POSE)] = pose_cov
         return InitialState(float(t0), x, P, note, obs, tuple(warnings) + extra,
-                            tuple(slipping_stretches(meas, robot, float(t0), float(tw[-1]))), heading_unknown)
+                            tuple(slipping_stretches(meas, robot, float(t0), float(tw[-1]))), heading_unknown,
+                            frame_free)
 
     if robot.initial is not None:
         i = robot.initial
@@ -145,7 +150,7 @@ def initial_state(robot: RobotConfig, meas: Measurements, pin: dict[str, str] | 
         if meas.ranges is not None:
             msg = ("no [initial] pose in robot.toml and the ranges never reach three beacons at once, so the "
                    "start cannot be multilaterated: it is taken as the origin, heading 0")
-        return finish(t0, np.zeros(3), np.diag([1e-6, 1e-6, 1e-6]), msg, (msg,))
+        return finish(t0, np.zeros(3), np.diag([1e-6, 1e-6, 1e-6]), msg, (msg,), frame_free=True)
     fit = consensus_pose(tw, meas.wheel.m[:, 0], meas.wheel.m[:, 1], _wheel_dt(meas), robot.track_width, *fixes,
                          pn.initial_scale_sigma)
     return finish(tw[0], fit.pose, fit.cov, f"initial pose from {source}: {fit.note}", fit.warnings,
@@ -333,7 +338,8 @@ def consensus_pose(tw, ml, mr, dtw, track, ft, fp, fs, lever, scale_sigma: float
                             "(sigma = pi)", moved=False)
     phi, cx, cy, inl, best = rigid_ransac(W_d, W_p, thr)
     if best < 0:
-        return ConsensusFit(np.array([*np.median(W_p, 0), 0.0]), np.diag([1.0, 1.0, np.pi**2]), m, 0,
+        s_p = max(1.0, float(np.hypot(*d[0]))) + back          # the circle of the path, as above
+        return ConsensusFit(np.array([*np.median(W_p, 0), 0.0]), np.diag([s_p**2, s_p**2, np.pi**2]), m, 0,
                             "position from the median of the first fixes; no pair of them fixes a heading", moved=False)
     keep = inl[best]
 
