@@ -907,9 +907,10 @@ class ISAM2Runner(_Runner):
         that were guesses, and a linear factor keeps its linearisation. Until
         the heading is known, the first segment is re-solved from its prior
         (Gauss-Newton over keyframes 0..k, as a recovery) at doubling ages
-        (0, 0.25, 0.5, 1, 2, ... s after the first fix or range: before
-        it nothing can pin the heading), and the ISAM2 restarted there: O(n) work in all. A
-        divergence watch that trips meanwhile re-solves from the prior too.
+        (0, 0.25, 0.5, 1, 2, ... s after the first fix or range is in the
+        graph: _absolute_age), and the ISAM2 restarted there: O(n) work in
+        all. A divergence watch that trips meanwhile re-solves from the
+        prior too.
 
         ``closing``: the first segment is about to be handed over at keyframe
         k (kept open until settled, at most FIRST_SEGMENT_CAP segment
