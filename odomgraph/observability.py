@@ -206,13 +206,22 @@ def combinations_of(mean: np.ndarray, cov: np.ndarray) -> dict[str, dict[str, fl
     return {n: {"value": val[n], "sigma": float(np.sqrt(max(J[n] @ cov @ J[n], 0.0)))} for n in J}
 
 
-def few_beacons_warnings(log) -> list[str]:
+#: The start's note and warning when ranges are the only absolute sensor and
+#: never give a fix (estimators.initial; few_beacons_warnings flags the estimate).
+UNPLACED_BY_RANGES = ("no [initial] pose in robot.toml and the ranges never reach three beacons within 3 s, so "
+                      "the start cannot be multilaterated: it is taken as the origin, heading 0")
+
+
+def few_beacons_warnings(log, warnings: list[str] = ()) -> list[str]:
     """One line when ranges are the only absolute sensor, there is no
     [initial] pose, and they come from fewer than three beacons: the start
     pose cannot be multilaterated, and the ranges leave the path free (one
     beacon: turned about it; two: mirrored across their line). The start is
     then taken as the origin, which the ranges contradict: a probe's log
-    with one beacon got 1 m RMS at 40 % coverage, unflagged."""
+    with one beacon got 1 m RMS at 40 % coverage, unflagged. With three or
+    more beacons that never give a fix together (``warnings``, the
+    estimate's, hold UNPLACED_BY_RANGES) the same holds: a yard log
+    13 m off at z 12000 was unflagged."""
     r = log.ranges
     if r is None or not len(r.t) or log.robot.initial is not None:
         return []
@@ -220,6 +229,10 @@ def few_beacons_warnings(log) -> list[str]:
         return []
     n = int(np.unique(r.beacon).size)
     if n >= 3:
+        if UNPLACED_BY_RANGES in warnings:
+            return [f"ranges from {n} beacons but never three of them within 3 s, and no GPS or [initial] pose: "
+                    "the start was taken as the origin, which the ranges contradict; positions and heading are "
+                    "not trustworthy; give robot.toml an [initial] pose"]
         return []
     how = "turned about it" if n == 1 else "mirrored across the line through them"
     return [f"ranges from only {n} beacon{'s' if n > 1 else ''} and no GPS or [initial] pose: the start cannot be "

@@ -313,7 +313,7 @@ def _estimate_checked(log: Log, method: Method, schedule: Schedule, progress, op
                + reversed_motion_warnings(est, log.robot.track_width)
                + (skid_warnings(est, log.robot.track_width) if _has_reference(log) else [])
                + path_scale_warnings(est, log)
-               + few_beacons_warnings(log))
+               + few_beacons_warnings(log, est.warnings))
     if log.gps is not None and not est.time_offsets:
         from odomgraph.analysis.timing import gps_offset_warnings
         suspect += gps_offset_warnings(log, est)

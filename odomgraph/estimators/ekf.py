@@ -328,6 +328,9 @@ class EKF:
         state.setdefault("pause_spans", [])
         state.setdefault("pauses", [])
         state.setdefault("pause_travel", [])
+        state.setdefault("_anchor", None)     # nor a late fit's anchor
+        state.setdefault("_anchor_until", -np.inf)
+        state.setdefault("anchored", None)
         self.__dict__.update(state)
         if "_rates" not in state:            # nor the rate noise kept whole
             self._rates = rate_noise(self._q, self._q_slip)
@@ -491,7 +494,8 @@ class EKF:
         for k in range(len(t_ev)):
             t, code, i = t_ev[k], code_ev[k], row_ev[k]
             value = self.step(t, code, *event_values(m, code, i), in_slip=slip_ev[k])
-            nis[code].append((t, value))
+            if value is not None:
+                nis[code].append((t, value))
             if code == WHEEL:
                 out_t[row] = t
                 out_x[row], out_var[row], out_pose[row] = self.row()
@@ -538,6 +542,9 @@ class EKF:
         # A start with no heading (standing still, no [initial]): fixes must not
         # make one up (estimators.heading). Until the motion shows it, they
         # are taken with the heading considered and the position floored.
+        self._anchor = self.init.anchor       # (_take_anchor)
+        self._anchor_until = -np.inf
+        self.anchored = None
         self.heading_watch = None
         self.heading_considered = 0          # fixes taken with the heading considered
         self.heading_known_at = None
@@ -556,7 +563,7 @@ class EKF:
         Pr = self.P if not self._pinned else decondition(self.P, obs, S.SCALE, obs.prior_sigma)
         return self.x.copy(), np.diagonal(Pr).copy(), Pr[0:3, 0:3].copy()
 
-    def step(self, t: float, code: int, z, *aux, in_slip: bool = False) -> float:
+    def step(self, t: float, code: int, z, *aux, in_slip: bool = False) -> float | None:
         """Predict to t [s] and process one measurement of sensor ``code``
         (sensors.WHEEL ...): wheels (speeds (2,) [m/s], their sigma (2,),
         and the encoder row's interval [s], 0 for wheel_speeds.csv), gyro
@@ -564,7 +571,8 @@ class EKF:
         ((1,) [m], beacon x, y (2,) [m], beacon id) or velocity ((v, omega)
         (2,)). ``in_slip``: t lies where the wheels slipped inside the
         calibration window (no zero-slip pseudo-update). Returns the NIS,
-        negative when the gate rejected it."""
+        negative when the gate rejected it, None for a fix or range that a
+        late start's anchor holds already (_take_anchor)."""
         sch, opt = self.schedule, self.options
         # an encoder row whose ticks span more than a pause's length
         long_row = code == WHEEL and len(aux) > 1 and aux[1] > PAUSE_S
@@ -573,6 +581,10 @@ class EKF:
             # began, stamped at its midpoint: a pause, as pause_spans would
             # have found had the log been known (a stream's is not).
             self.pause_spans = sorted({*self.pause_spans, (t - 0.5 * aux[1], t + 0.5 * aux[1])})
+        if self._anchor is not None and t >= self._anchor.t:
+            self._take_anchor()
+        if code in (GPS, RANGE) and t <= self._anchor_until:
+            return None       # in the anchor already (_take_anchor)
         self.predict(t)
         if self.switch_sigma is None and self.t_switch is not None and t >= self.t_switch:
             # The schedule switches: from here on every update holds the scale factors.
@@ -640,6 +652,31 @@ class EKF:
         if nis_k >= 0:          # (a rejected or held-out measurement says nothing of divergence)
             self._watch(t, code, nis_k)
         return nis_k
+
+    def _take_anchor(self) -> None:
+        """At the first absolute measurement of a start fitted to late fixes
+        (initial.Anchor): the pose becomes the fit's pose there, with its
+        covariance and no correlation with the other states, when that is
+        tighter than the pose carried back to the start and forward again
+        (both come from the same fixes, so the prediction adds nothing to
+        it). The fixes' updates are then linearised where the robot is."""
+        a = self._anchor
+        self._anchor = None
+        self.predict(a.t)
+        before = np.sqrt(np.diagonal(self.P)[0:3])
+        if before[2] ** 2 <= a.cov[2, 2] and np.trace(self.P[0:2, 0:2]) <= np.trace(a.cov[0:2, 0:2]):
+            return
+        self.x[POSE_IDX] = a.pose
+        self.P[POSE_IDX, :] = 0.0
+        self.P[:, POSE_IDX] = 0.0
+        self.P[POSE_IDX, POSE_IDX] = a.cov
+        self._anchor_until = a.until
+        after = np.sqrt(np.diagonal(a.cov))
+        self.anchored = (f"the start was carried back {a.t - self.init.t:.1f} s from the first absolute measurement "
+                         f"along the wheels; there (t={a.t:.2f} s) the filter took the start fit's pose "
+                         f"(position sigma {max(before[:2]):.2g} -> {max(after[:2]):.2g} m, heading "
+                         f"{np.degrees(before[2]):.0f} -> {np.degrees(after[2]):.1f} deg), and not again the "
+                         f"{a.n} fixes it was fitted to (up to t={a.until:.2f} s)")
 
     def _pose_update(self, z, h, H, R, gate, ref, lever, watch) -> float:
         """A fix's or range's update (eq. 8-9, 12-16). While ``watch`` says
@@ -744,7 +781,7 @@ class EKF:
         est.recoveries = list(self.recoveries)
         est.held_out = {k: np.asarray(v) for k, v in self.held_t.items()}
         est.warnings += self.window_warnings + self.heading_warnings()
-        est.notes += self.pause_notes()
+        est.notes += self.pause_notes() + ([self.anchored] if self.anchored else [])
         for k, v in m.spikes.items():
             est.rejected[k] = est.rejected.get(k, 0) + v
         return est

@@ -22,12 +22,43 @@ from odomgraph.factors.motion import integrate
 from odomgraph import state as S
 from odomgraph.errors import NotEnoughDataError
 from odomgraph.estimators.measurements import Measurements
-from odomgraph.observability import Observability, prior_scale_cov, structure
+from odomgraph.observability import UNPLACED_BY_RANGES, Observability, prior_scale_cov, structure
 from odomgraph.estimators.slipcheck import slipping_stretches
 from odomgraph.io.robot import RobotConfig
 
-#: Longest multilateration window: ranges older than this are not combined [s].
+#: Multilateration window: each beacon's latest range within it is combined [s].
 _RANGE_WINDOW = 0.6
+#: Longest window, where ranges come too slowly for three beacons inside
+#: _RANGE_WINDOW (beacons polled in turn at 1 Hz each) [s]; the robot's
+#: travel across it widens the fix's sigma.
+_RANGE_WINDOW_MAX = 3.0
+
+
+@dataclass(frozen=True)
+class Anchor:
+    """The start fit's pose at the first absolute measurement, when that came
+    long after the start.
+
+    The start (InitialState.x) is then this pose carried back along the
+    wheels, with all the carrying back can have drifted: tens of metres and
+    pi rad wide after half a minute. A filter linearised at such a guess
+    went wrong at its first ranges (0.3 m off at sigma 0.03 m, z 13, or a
+    divergence). At ``t`` the fixes know the pose far better; a filter takes
+    it there (ekf.EKF._take_anchor) and does not use again the measurements
+    the fit was made of (up to ``until``): the fit holds them all, where a
+    prior that let them in again could carry about one fix's worth, too
+    little for a heading (1.8 rad wide, and the filter overconfident after).
+    """
+    t: float
+    """Time of the first absolute measurement [s]."""
+    pose: np.ndarray
+    """(3,) x, y [m], theta [rad] of the robot at t, world frame."""
+    cov: np.ndarray
+    """(3, 3) its covariance, from the fit's fixes alone."""
+    until: float
+    """Last fix time the fit used [s]: absolute measurements up to it are in the anchor."""
+    n: int
+    """Fixes the fit used."""
 
 
 @dataclass(frozen=True)
@@ -53,6 +84,9 @@ class InitialState:
     """No absolute measurement placed the start: it is the origin, heading 0,
     the wheels' own frame (a stream starts again in the fixes' frame when
     they come: online.Online._anchor)."""
+    anchor: Anchor | None = None
+    """The pose at the first absolute measurement, when it came long after
+    the start (see Anchor)."""
 
 
 def _wheel_rates(robot: RobotConfig, meas: Measurements):
@@ -63,18 +97,40 @@ def _wheel_rates(robot: RobotConfig, meas: Measurements):
 
 def range_fixes(meas: Measurements, robot: RobotConfig, limit: int | None = 400):
     """Multilateration fixes (t, xy, sigma, lever arm) of the ranging antenna
-    from the first ``limit`` ranges (all with None), by Gauss-Newton."""
+    from the first ``limit`` ranges (all with None), by Gauss-Newton; None
+    if no three beacons are ever in range together.
+
+    A fix combines each beacon's latest range within _RANGE_WINDOW, or, when
+    that holds fewer than three beacons (beacons polled in turn, slowly),
+    within _RANGE_WINDOW_MAX. Its ranges are taken at different times on a
+    moving robot: it is stamped at their mean time, where it lies for a
+    steady motion (at the newest range's it lagged the robot by 0.2-0.3 s
+    of travel, and a start fitted to such fixes was 3.5 sigma off). A fix
+    from the longer window also carries, in its sigma, how far the antenna
+    can have moved between its ranges and its stamp (the wheels' speed,
+    with room for their scale factors): with only the 0.6 s window, a
+    round-robin log at 1 Hz a beacon had no fix at all, and every estimator
+    started at the origin and put the path 13 m off at z 12000, unflagged.
+    """
     t, bxy, rr = meas.ranges
     out_t, out_p, out_s = [], [], []
     latest: dict[tuple, tuple[float, float]] = {}
     sig_r = robot.range_sigma + float(np.hypot(*robot.range_lever_arm))
+    # the antenna's fastest speed over the wheels' measurements since each (upper bound) [m/s]
+    tw = meas.wheel.t
+    v_wheel = (np.abs(0.5 * (meas.wheel.m[:, 0] + meas.wheel.m[:, 1]))
+               + 0.5 * np.abs(meas.wheel.m[:, 1] - meas.wheel.m[:, 0]) / robot.track_width
+               * float(np.hypot(*robot.range_lever_arm))) * (1.0 + 3.0 * robot.process.initial_scale_sigma)
     for k in range(len(t) if limit is None else min(len(t), limit)):
         latest[tuple(bxy[k])] = (t[k], rr[k])
-        pts = [(np.array(b), r) for b, (tb, r) in latest.items() if t[k] - tb <= _RANGE_WINDOW]
+        pts = [(np.array(b), r, tb) for b, (tb, r) in latest.items() if t[k] - tb <= _RANGE_WINDOW]
+        slow = len(pts) < 3
+        if slow:
+            pts = [(np.array(b), r, tb) for b, (tb, r) in latest.items() if t[k] - tb <= _RANGE_WINDOW_MAX]
         if len(pts) < 3:
             continue
-        B = np.array([p for p, _ in pts])
-        R = np.array([r for _, r in pts])
+        B = np.array([p for p, _, _ in pts])
+        R = np.array([r for _, r, _ in pts])
         p = B.mean(0) + 0.1
         for _ in range(20):
             d = p - B
@@ -88,10 +144,17 @@ def range_fixes(meas: Measurements, robot: RobotConfig, limit: int | None = 400)
         if np.linalg.cond(JtJ) > 1e6:
             continue
         cov = np.linalg.inv(JtJ) * sig_r**2
-        out_t.append(t[k]); out_p.append(p); out_s.append(float(np.sqrt(np.max(np.linalg.eigvalsh(cov)))))
+        tb = np.array([tb for _, _, tb in pts])
+        s = float(np.sqrt(np.max(np.linalg.eigvalsh(cov))))
+        if slow:
+            sel = (tw >= tb.min() - 0.5) & (tw <= tb.max() + 0.5)
+            v = float(v_wheel[sel].max()) if sel.any() else float(v_wheel.max()) if v_wheel.size else 0.0
+            s = float(np.hypot(s, v * float(np.max(np.abs(tb - tb.mean())))))
+        out_t.append(float(tb.mean())); out_p.append(p); out_s.append(s)
     if not out_t:
         return None
-    return np.array(out_t), np.array(out_p), np.array(out_s), tuple(robot.range_lever_arm)
+    order = np.argsort(out_t, kind="stable")
+    return (np.array(out_t)[order], np.array(out_p)[order], np.array(out_s)[order], tuple(robot.range_lever_arm))
 
 
 def initial_state(robot: RobotConfig, meas: Measurements, pin: dict[str, str] | None = None) -> InitialState:
@@ -115,7 +178,7 @@ def initial_state(robot: RobotConfig, meas: Measurements, pin: dict[str, str] | 
     P[np.ix_(S.SCALE, S.SCALE)] = prior_scale_cov(obs, pn.initial_scale_sigma)
     tw, vw, ww = _wheel_rates(robot, meas)
 
-    def finish(t0, pose, pose_cov, note, warnings=(), heading_unknown=False, frame_free=False):
+    def finish(t0, pose, pose_cov, note, warnings=(), heading_unknown=False, frame_free=False, anchor=None):
         if np.sum(tw >= t0) < 2:
             raise NotEnoughDataError(f"fewer than two wheel measurements after the estimator's start at "
                                      f"t={t0:.6g} s ({note}); the wheel odometry ends at t={tw[-1]:.6g} s")
@@ -130,7 +193,7 @@ def initial_state(robot: RobotConfig, meas: Measurements, pin: dict[str, str] | 
         P[np.ix_(S.POSE, S.POSE)] = pose_cov
         return InitialState(float(t0), x, P, note, obs, tuple(warnings) + extra,
                             tuple(slipping_stretches(meas, robot, float(t0), float(tw[-1]))), heading_unknown,
-                            frame_free)
+                            frame_free, anchor)
 
     if robot.initial is not None:
         i = robot.initial
@@ -148,13 +211,13 @@ def initial_state(robot: RobotConfig, meas: Measurements, pin: dict[str, str] | 
         msg = ("no absolute sensor and no [initial] pose in robot.toml: the start pose is taken as the origin, "
                "heading 0 (positions are relative to it)")
         if meas.ranges is not None:
-            msg = ("no [initial] pose in robot.toml and the ranges never reach three beacons at once, so the "
-                   "start cannot be multilaterated: it is taken as the origin, heading 0")
+            msg = UNPLACED_BY_RANGES
         return finish(t0, np.zeros(3), np.diag([1e-6, 1e-6, 1e-6]), msg, (msg,), frame_free=True)
+    t_abs = min(s[0][0] for s in (meas.gps, meas.ranges) if s is not None)
     fit = consensus_pose(tw, meas.wheel.m[:, 0], meas.wheel.m[:, 1], _wheel_dt(meas), robot.track_width, *fixes,
-                         pn.initial_scale_sigma)
+                         pn.initial_scale_sigma, t_first=t_abs)
     return finish(tw[0], fit.pose, fit.cov, f"initial pose from {source}: {fit.note}", fit.warnings,
-                  heading_unknown=not fit.moved)
+                  heading_unknown=not fit.moved, anchor=fit.anchor)
 
 
 # ------------------------------------------------------------- consensus start
@@ -179,6 +242,8 @@ class ConsensusFit:
     warnings: tuple[str, ...] = ()
     moved: bool = True
     """False: the fixes showed no motion, so no heading (sigma pi)."""
+    anchor: Anchor | None = None
+    """The pose at the first absolute measurement, when it came late (Anchor)."""
 
 
 def _wheel_dt(meas: Measurements) -> np.ndarray:
@@ -248,7 +313,8 @@ def _antenna_at(dr, t_dr, ft, lever):
                      np.interp(ft, t_dr, dr[:, 1]) + np.sin(th) * lever[0] + np.cos(th) * lever[1]], -1)
 
 
-def consensus_pose(tw, ml, mr, dtw, track, ft, fp, fs, lever, scale_sigma: float) -> ConsensusFit:
+def consensus_pose(tw, ml, mr, dtw, track, ft, fp, fs, lever, scale_sigma: float,
+                   t_first: float | None = None) -> ConsensusFit:
     """The start pose that best maps the wheels' own path onto the first fixes,
     robust to outliers among them (RANSAC, then least squares).
 
@@ -271,6 +337,10 @@ def consensus_pose(tw, ml, mr, dtw, track, ft, fp, fs, lever, scale_sigma: float
         ft, fp, fs: (M,) fix times, (M, 2) antenna positions, (M,) sigma [m].
         lever: (2,) antenna in the robot frame [m].
         scale_sigma: prior 1-sigma of the scale factors.
+        t_first: time of the first absolute measurement [s] (the first range,
+            before the first multilateration fix); default ft[0]. The anchor
+            (ConsensusFit.anchor) is given there, so that no measurement
+            comes before it.
 
     Returns the pose at tw[0] with an honest covariance: the fit's (scale
     errors marginalised), scaled by its reduced chi-square when the fixes
@@ -399,9 +469,43 @@ def consensus_pose(tw, ml, mr, dtw, track, ft, fp, fs, lever, scale_sigma: float
         cov[2, 2] = max(cov[2, 2], amb**2)
         warnings = (f"initial heading is ambiguous: fits {np.degrees(amb):.0f} deg apart explain the first fixes "
                     "nearly as well; its sigma says so",)
+    floor = 0.5 * float(np.median(W_s))
+    anchor = None
+    t_a = min(float(W_t[0]), float(ft[0]) if t_first is None else max(float(t_first), float(tw[0])))
+    if t_a - float(tw[0]) > 1.0 and float(np.interp(t_a, t_dr, travel)) > 0.0:
+        # The pose at the first fix, which the window's fixes pin without any
+        # carrying back: the path's pose there mapped by (cx, cy, phi), with
+        # the covariance of the map and the scale errors pushed through it
+        # (numerically).
+        def pose_at_first(q):
+            path = _antenna_path(ml[sl], mr[sl], dtw[sl], track, lever, q[3:6])
+            tn = t_dr[:path.shape[0]]
+            px, py, pt = (np.interp(t_a, tn, path[:, j]) for j in range(3))
+            cq, sq = np.cos(q[2]), np.sin(q[2])
+            return np.array([cq * px - sq * py + q[0], sq * px + cq * py + q[1], pt + q[2]])
+
+        a0 = pose_at_first(q)
+        Jp = np.empty((3, 6))
+        for j in range(6):
+            dq = q.copy()
+            dq[j] += 1e-6
+            Jp[:, j] = (pose_at_first(dq) - a0) / 1e-6
+        # Not scaled by the number of fixes as the start's is (the filter does
+        # not use them again), but by what their errors' correlation from one
+        # fix to the next leaves of them (n (1 - rho) / (1 + rho) independent
+        # ones): multilaterated fixes share ranges, and GPS errors persist.
+        # Without it the anchor was 3.5 sigma off on a range-only log.
+        res = r[:nfix].reshape(-1, 2)
+        den = float(np.sum(res[:-1] ** 2))
+        rho = min(max(float(np.sum(res[1:] * res[:-1])) / den if den > 0.0 else 0.0, 0.0), 0.9)
+        cov_a = Jp @ cov6 @ Jp.T * max(1.0, chi2) * (1.0 + rho) / (1.0 - rho)
+        cov_a[2, 2] = max(cov_a[2, 2], amb**2)
+        cov_a += np.diag([floor**2, floor**2, 0.01**2])
+        if cov_a[2, 2] < np.pi**2:
+            anchor = Anchor(t_a, np.array([a0[0], a0[1], float(wrap_angle(a0[2]))]), cov_a, float(W_t[-1]),
+                            int(keep.sum()))
     # Dead reckoning's own error back to the first wheel measurement, and a
     # floor for what the rigid-path model leaves out (timing, interpolation).
-    floor = 0.5 * float(np.median(W_s))
     cov[0, 0] += back**2 + floor**2
     cov[1, 1] += back**2 + floor**2
     cov[2, 2] += back_th**2 + 0.01**2
@@ -415,4 +519,4 @@ def consensus_pose(tw, ml, mr, dtw, track, ft, fp, fs, lever, scale_sigma: float
             f"{W_sf[-1] - W_sf[0]:.1f} m of travel)" + (f", {n_out} rejected as outliers" if n_out else ""))
     if t_first_gap > 1.0:
         note += f"; carried back {t_first_gap:.1f} s to the first wheel measurement"
-    return ConsensusFit(q[:3].copy(), cov, int(keep.sum()), n_out, note, warnings)
+    return ConsensusFit(q[:3].copy(), cov, int(keep.sum()), n_out, note, warnings, anchor=anchor)
