@@ -674,9 +674,8 @@ class Online:
             self._fail_t = float(t_ev[k])
             nis = ekf.step(t_ev[k], code, *event_values(meas, code, row_ev[k]), in_slip=bool(slip[k]))
             name = SENSOR_NAMES[code]
-            # (None: a late start's anchor holds it, ekf.EKF._take_anchor; used, with no NIS of its own)
-            _Counts.add(counts.accepted if nis is None or nis >= 0 else counts.rejected, name)
-            if nis is not None and nis >= 0:
+            _Counts.add(counts.accepted if nis >= 0 else counts.rejected, name)
+            if nis >= 0:
                 acc = self._nis.setdefault(name, [0.0, 0, DOF[code], False])
                 acc[0] += nis
                 acc[1] += 1

@@ -33,7 +33,7 @@ from odomgraph import state as S
 from odomgraph.checks import bounded, check_fields
 from odomgraph.errors import EstimatorDivergedError
 from odomgraph.estimators.heading import HeadingWatch, circle_variance
-from odomgraph.estimators.initial import InitialState, initial_state
+from odomgraph.estimators.initial import ANCHOR_SHARE, InitialState, initial_state
 from odomgraph.estimators.measurements import (PAUSE_PATH_SHARE, PAUSE_S, PAUSE_TURN_SHARE, from_log, pause_spans,
                                                 slip_intensity)
 from odomgraph.observability import decondition, held_pins
@@ -329,7 +329,7 @@ class EKF:
         state.setdefault("pauses", [])
         state.setdefault("pause_travel", [])
         state.setdefault("_anchor", None)     # nor a late fit's anchor
-        state.setdefault("_anchor_until", -np.inf)
+        state.setdefault("_anchor_until", (-1, -np.inf))
         state.setdefault("anchored", None)
         self.__dict__.update(state)
         if "_rates" not in state:            # nor the rate noise kept whole
@@ -494,8 +494,7 @@ class EKF:
         for k in range(len(t_ev)):
             t, code, i = t_ev[k], code_ev[k], row_ev[k]
             value = self.step(t, code, *event_values(m, code, i), in_slip=slip_ev[k])
-            if value is not None:
-                nis[code].append((t, value))
+            nis[code].append((t, value))
             if code == WHEEL:
                 out_t[row] = t
                 out_x[row], out_var[row], out_pose[row] = self.row()
@@ -543,7 +542,7 @@ class EKF:
         # make one up (estimators.heading). Until the motion shows it, they
         # are taken with the heading considered and the position floored.
         self._anchor = self.init.anchor       # (_take_anchor)
-        self._anchor_until = -np.inf
+        self._anchor_until = (-1, -np.inf)  # (sensor, last time) the anchor shares
         self.anchored = None
         self.heading_watch = None
         self.heading_considered = 0          # fixes taken with the heading considered
@@ -563,7 +562,7 @@ class EKF:
         Pr = self.P if not self._pinned else decondition(self.P, obs, S.SCALE, obs.prior_sigma)
         return self.x.copy(), np.diagonal(Pr).copy(), Pr[0:3, 0:3].copy()
 
-    def step(self, t: float, code: int, z, *aux, in_slip: bool = False) -> float | None:
+    def step(self, t: float, code: int, z, *aux, in_slip: bool = False) -> float:
         """Predict to t [s] and process one measurement of sensor ``code``
         (sensors.WHEEL ...): wheels (speeds (2,) [m/s], their sigma (2,),
         and the encoder row's interval [s], 0 for wheel_speeds.csv), gyro
@@ -571,8 +570,7 @@ class EKF:
         ((1,) [m], beacon x, y (2,) [m], beacon id) or velocity ((v, omega)
         (2,)). ``in_slip``: t lies where the wheels slipped inside the
         calibration window (no zero-slip pseudo-update). Returns the NIS,
-        negative when the gate rejected it, None for a fix or range that a
-        late start's anchor holds already (_take_anchor)."""
+        negative when the gate rejected it."""
         sch, opt = self.schedule, self.options
         # an encoder row whose ticks span more than a pause's length
         long_row = code == WHEEL and len(aux) > 1 and aux[1] > PAUSE_S
@@ -583,8 +581,6 @@ class EKF:
             self.pause_spans = sorted({*self.pause_spans, (t - 0.5 * aux[1], t + 0.5 * aux[1])})
         if self._anchor is not None and t >= self._anchor.t:
             self._take_anchor()
-        if code in (GPS, RANGE) and t <= self._anchor_until:
-            return None       # in the anchor already (_take_anchor)
         self.predict(t)
         if self.switch_sigma is None and self.t_switch is not None and t >= self.t_switch:
             # The schedule switches: from here on every update holds the scale factors.
@@ -631,14 +627,14 @@ class EKF:
             h, H = gps.antenna_position(x[0], x[1], x[2], self.robot.gps_lever_arm)   # eq. 8-9
             sg = aux[0]
             key = (GPS, 0)
-            R_k = np.eye(2) * sg * sg
+            R_k = np.eye(2) * (sg * sg * self._anchor_inflation(GPS, t))
             # a sensor held out after a jump gets no rescue from its recent innovations (the jump's)
             ref = None if key in jump else gate_reference(hist.setdefault(key, []))
             nis_k = self._pose_update(z, h, H, R_k, gates[GPS], ref, self.robot.gps_lever_arm, hw)
         elif code == RANGE:
             h, H = ranging.beacon_range(x[0], x[1], x[2], aux[0], self.robot.range_lever_arm)   # eq. 12-16
             key = (RANGE, aux[1])
-            R_k = self._R[RANGE]
+            R_k = self._R[RANGE] * self._anchor_inflation(RANGE, t)
             ref = None if key in jump else gate_reference(hist.setdefault(key, []))
             nis_k = self._pose_update(z, h, H[:, :3], R_k, gates[RANGE], ref, self.robot.range_lever_arm, hw)
         else:
@@ -654,12 +650,14 @@ class EKF:
         return nis_k
 
     def _take_anchor(self) -> None:
-        """At the first absolute measurement of a start fitted to late fixes
-        (initial.Anchor): the pose becomes the fit's pose there, with its
-        covariance and no correlation with the other states, when that is
-        tighter than the pose carried back to the start and forward again
-        (both come from the same fixes, so the prediction adds nothing to
-        it). The fixes' updates are then linearised where the robot is."""
+        """At the first measurement of a start fitted to late fixes
+        (initial.Anchor): the pose becomes the fit's pose there, with the
+        anchor's covariance and no correlation with the other states, when
+        that is tighter than the pose carried back to the start and forward
+        again (both come from the same fixes, so the prediction adds nothing
+        to it). The fixes' updates are then linearised where the robot is;
+        the fit's fixes are taken at the information the anchor left them
+        (_anchor_inflation)."""
         a = self._anchor
         self._anchor = None
         self.predict(a.t)
@@ -670,13 +668,18 @@ class EKF:
         self.P[POSE_IDX, :] = 0.0
         self.P[:, POSE_IDX] = 0.0
         self.P[POSE_IDX, POSE_IDX] = a.cov
-        self._anchor_until = a.until
+        self._anchor_until = (GPS if a.sensor == "gps" else RANGE, a.until)
         after = np.sqrt(np.diagonal(a.cov))
-        self.anchored = (f"the start was carried back {a.t - self.init.t:.1f} s from the first absolute measurement "
-                         f"along the wheels; there (t={a.t:.2f} s) the filter took the start fit's pose "
-                         f"(position sigma {max(before[:2]):.2g} -> {max(after[:2]):.2g} m, heading "
-                         f"{np.degrees(before[2]):.0f} -> {np.degrees(after[2]):.1f} deg), and not again the "
-                         f"{a.n} fixes it was fitted to (up to t={a.until:.2f} s)")
+        self.anchored = (f"the start was carried back {a.t - self.init.t:.1f} s along the wheels from the first "
+                         f"{'GPS fix' if a.sensor == 'gps' else 'range'}; there (t={a.t:.2f} s) the filter took the "
+                         f"start fit's pose (position sigma {max(before[:2]):.2g} -> {max(after[:2]):.2g} m, heading "
+                         f"{np.degrees(before[2]):.0f} -> {np.degrees(after[2]):.1f} deg), sharing the information of "
+                         f"the {a.n} fixes it was fitted to (up to t={a.until:.2f} s) with them")
+
+    def _anchor_inflation(self, code: int, t: float) -> float:
+        """Variance factor of a measurement the anchor shares (initial.Anchor): 1 / (1 - ANCHOR_SHARE)."""
+        c, until = self._anchor_until
+        return 1.0 / (1.0 - ANCHOR_SHARE) if code == c and t <= until else 1.0
 
     def _pose_update(self, z, h, H, R, gate, ref, lever, watch) -> float:
         """A fix's or range's update (eq. 8-9, 12-16). While ``watch`` says

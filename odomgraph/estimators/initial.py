@@ -34,9 +34,14 @@ _RANGE_WINDOW = 0.6
 _RANGE_WINDOW_MAX = 3.0
 
 
+#: The anchor's share of its fixes' information (Anchor): the filter takes
+#: the fixes again at the rest (their variance / (1 - ANCHOR_SHARE)).
+ANCHOR_SHARE = 0.5
+
+
 @dataclass(frozen=True)
 class Anchor:
-    """The start fit's pose at the first absolute measurement, when that came
+    """The start fit's pose at its sensor's first measurement, when that came
     long after the start.
 
     The start (InitialState.x) is then this pose carried back along the
@@ -44,21 +49,26 @@ class Anchor:
     pi rad wide after half a minute. A filter linearised at such a guess
     went wrong at its first ranges (0.3 m off at sigma 0.03 m, z 13, or a
     divergence). At ``t`` the fixes know the pose far better; a filter takes
-    it there (ekf.EKF._take_anchor) and does not use again the measurements
-    the fit was made of (up to ``until``): the fit holds them all, where a
-    prior that let them in again could carry about one fix's worth, too
-    little for a heading (1.8 rad wide, and the filter overconfident after).
+    it there (ekf.EKF._take_anchor). The fit and the filter share the fixes'
+    information rather than count it twice: ``cov`` is the fit's covariance
+    over ANCHOR_SHARE, and the filter takes the fit's fixes (up to ``until``)
+    with their variance over 1 - ANCHOR_SHARE. (A prior worth one fix was
+    too little for a heading: 1.8 rad wide, and the filter overconfident
+    after; a filter that left the fixes out coasted through a 14 s window of
+    0.5 Hz fixes and came out z 7.)
     """
     t: float
-    """Time of the first absolute measurement [s]."""
+    """Time of the fit's sensor's first measurement [s]."""
     pose: np.ndarray
     """(3,) x, y [m], theta [rad] of the robot at t, world frame."""
     cov: np.ndarray
-    """(3, 3) its covariance, from the fit's fixes alone."""
+    """(3, 3) its covariance: the fit's, over ANCHOR_SHARE."""
     until: float
-    """Last fix time the fit used [s]: absolute measurements up to it are in the anchor."""
+    """Last fix time the fit used [s]."""
     n: int
     """Fixes the fit used."""
+    sensor: str = "gps"
+    """The fit's sensor: "gps" or "ranges"."""
 
 
 @dataclass(frozen=True)
@@ -204,8 +214,13 @@ def initial_state(robot: RobotConfig, meas: Measurements, pin: dict[str, str] | 
     fixes, source = None, ""
     if meas.gps is not None:
         fixes, source = (*meas.gps, robot.gps_lever_arm), "GPS"
-    elif meas.ranges is not None:
-        fixes, source = range_fixes(meas, robot), "multilateration of the first ranges"
+    if meas.ranges is not None and (meas.gps is None or meas.ranges[0][0] < meas.gps[0][0] - 1.0):
+        # Ranges alone, or long before the first GPS fix: the start is fitted
+        # to the first measurements there are (fitted to GPS 40 s on, the
+        # filter met 40 s of ranges with a start 10 m and 2 rad wide: z 36).
+        rf = range_fixes(meas, robot)
+        if rf is not None or fixes is None:
+            fixes, source = rf, "multilateration of the first ranges"
     if fixes is None:
         t0 = tw[0]
         msg = ("no absolute sensor and no [initial] pose in robot.toml: the start pose is taken as the origin, "
@@ -213,9 +228,12 @@ def initial_state(robot: RobotConfig, meas: Measurements, pin: dict[str, str] | 
         if meas.ranges is not None:
             msg = UNPLACED_BY_RANGES
         return finish(t0, np.zeros(3), np.diag([1e-6, 1e-6, 1e-6]), msg, (msg,), frame_free=True)
-    t_abs = min(s[0][0] for s in (meas.gps, meas.ranges) if s is not None)
+    sensor = meas.gps if source == "GPS" else meas.ranges
     fit = consensus_pose(tw, meas.wheel.m[:, 0], meas.wheel.m[:, 1], _wheel_dt(meas), robot.track_width, *fixes,
-                         pn.initial_scale_sigma, t_first=t_abs)
+                         pn.initial_scale_sigma, t_first=float(sensor[0][0]))
+    if fit.anchor is not None and source != "GPS":
+        from dataclasses import replace
+        fit = replace(fit, anchor=replace(fit.anchor, sensor="ranges"))
     return finish(tw[0], fit.pose, fit.cov, f"initial pose from {source}: {fit.note}", fit.warnings,
                   heading_unknown=not fit.moved, anchor=fit.anchor)
 
@@ -337,10 +355,10 @@ def consensus_pose(tw, ml, mr, dtw, track, ft, fp, fs, lever, scale_sigma: float
         ft, fp, fs: (M,) fix times, (M, 2) antenna positions, (M,) sigma [m].
         lever: (2,) antenna in the robot frame [m].
         scale_sigma: prior 1-sigma of the scale factors.
-        t_first: time of the first absolute measurement [s] (the first range,
-            before the first multilateration fix); default ft[0]. The anchor
-            (ConsensusFit.anchor) is given there, so that no measurement
-            comes before it.
+        t_first: time of the fixes' sensor's first measurement [s] (the
+            first range, before the first multilateration fix); default
+            ft[0]. The anchor (ConsensusFit.anchor) is given there, so that
+            none of its measurements comes before it.
 
     Returns the pose at tw[0] with an honest covariance: the fit's (scale
     errors marginalised), scaled by its reduced chi-square when the fixes
@@ -490,20 +508,20 @@ def consensus_pose(tw, ml, mr, dtw, track, ft, fp, fs, lever, scale_sigma: float
             dq = q.copy()
             dq[j] += 1e-6
             Jp[:, j] = (pose_at_first(dq) - a0) / 1e-6
-        # Not scaled by the number of fixes as the start's is (the filter does
-        # not use them again), but by what their errors' correlation from one
+        # Not scaled by the number of fixes as the start's is (the filter
+        # shares their information, Anchor), but by what their errors' correlation from one
         # fix to the next leaves of them (n (1 - rho) / (1 + rho) independent
         # ones): multilaterated fixes share ranges, and GPS errors persist.
         # Without it the anchor was 3.5 sigma off on a range-only log.
-        res = r[:nfix].reshape(-1, 2)
+        res = (W_p[keep] - predict(q, keep)) / W_s[keep][:, None]     # (the kept fixes', in time order)
         den = float(np.sum(res[:-1] ** 2))
         rho = min(max(float(np.sum(res[1:] * res[:-1])) / den if den > 0.0 else 0.0, 0.0), 0.9)
         cov_a = Jp @ cov6 @ Jp.T * max(1.0, chi2) * (1.0 + rho) / (1.0 - rho)
         cov_a[2, 2] = max(cov_a[2, 2], amb**2)
         cov_a += np.diag([floor**2, floor**2, 0.01**2])
         if cov_a[2, 2] < np.pi**2:
-            anchor = Anchor(t_a, np.array([a0[0], a0[1], float(wrap_angle(a0[2]))]), cov_a, float(W_t[-1]),
-                            int(keep.sum()))
+            anchor = Anchor(t_a, np.array([a0[0], a0[1], float(wrap_angle(a0[2]))]), cov_a / ANCHOR_SHARE,
+                            float(W_t[-1]), int(keep.sum()))
     # Dead reckoning's own error back to the first wheel measurement, and a
     # floor for what the rigid-path model leaves out (timing, interpolation).
     cov[0, 0] += back**2 + floor**2
