@@ -208,8 +208,9 @@ def combinations_of(mean: np.ndarray, cov: np.ndarray) -> dict[str, dict[str, fl
 
 #: The start's note and warning when ranges are the only absolute sensor and
 #: never give a fix (estimators.initial; few_beacons_warnings flags the estimate).
-UNPLACED_BY_RANGES = ("no [initial] pose in robot.toml and the ranges never reach three beacons within 3 s, so "
-                      "the start cannot be multilaterated: it is taken as the origin, heading 0")
+UNPLACED_BY_RANGES = ("no [initial] pose in robot.toml and the first ranges never give a multilateration fix (three "
+                      "beacons within 3 s, not in a line), so the start cannot be placed: it is taken as the origin, "
+                      "heading 0")
 
 
 def few_beacons_warnings(log, warnings: list[str] = ()) -> list[str]:
@@ -230,9 +231,10 @@ def few_beacons_warnings(log, warnings: list[str] = ()) -> list[str]:
     n = int(np.unique(r.beacon).size)
     if n >= 3:
         if UNPLACED_BY_RANGES in warnings:
-            return [f"ranges from {n} beacons but never three of them within 3 s, and no GPS or [initial] pose: "
-                    "the start was taken as the origin, which the ranges contradict; positions and heading are "
-                    "not trustworthy; give robot.toml an [initial] pose"]
+            return [f"ranges from {n} beacons but no multilateration fix from the first of them (three beacons "
+                    "within 3 s, not in a line), and no GPS or [initial] pose: the start was taken as the origin, "
+                    "which the ranges contradict; positions and heading are not trustworthy; give robot.toml an "
+                    "[initial] pose"]
         return []
     how = "turned about it" if n == 1 else "mirrored across the line through them"
     return [f"ranges from only {n} beacon{'s' if n > 1 else ''} and no GPS or [initial] pose: the start cannot be "

@@ -141,6 +141,20 @@ def test_ranges_long_before_the_first_gps_fix(seed):
     assert z < 4.0 and zth < 4.0, (err, z, zth)
 
 
+def test_a_gps_fix_a_few_seconds_after_the_first_range_keeps_the_start_on_gps():
+    """A receiver's usual start-up: the fit (and its anchor) stay the GPS's."""
+    sc = paper(60.0).with_(slips=())
+    sc = sc.with_(rates=replace(sc.rates, ranges=5.0), robot=sc.robot.with_(beacons=beacons_around_path(sc)))
+    log = simulate(sc, 4)
+    log = log.with_(gps=_cut(log.gps, log.gps.t > 3.0))
+    init = initial_state(log.robot, from_log(log))
+    assert init.note.startswith("initial pose from GPS")
+    assert init.anchor is not None and init.anchor.sensor == "gps" and 3.0 < init.anchor.t < 3.2
+    est = estimate(log, Method.ekf, Schedule(20.0))
+    err, z, zth = worst_z(est.t, est.mean, est.sigma, log)
+    assert z < 4.0 and zth < 4.0, (err, z, zth)
+
+
 def test_late_gps_is_anchored_and_honest():
     log = late_gps_log(19, 45.0)
     est = estimate(log, Method.ekf, Schedule(20.0))
@@ -180,7 +194,7 @@ def test_beacons_too_slow_to_multilaterate_are_flagged():
     origin, which the ranges contradict; the estimate says so."""
     log = late_range_log(5, 0.0, yard(90.0).with_(slips=()), hz=0.2)
     est = estimate(log, Method.ekf, Schedule(20.0))
-    assert any("never three of them within 3 s" in f and f.endswith("[initial] pose") for f in est.flags)
+    assert any("no multilateration fix" in f and f.endswith("[initial] pose") for f in est.flags)
 
 
 def test_a_stream_takes_the_anchor_inside_its_warm_up():
@@ -197,12 +211,10 @@ def test_a_stream_takes_the_anchor_inside_its_warm_up():
     t = np.array([r.t for r in rows])
     err, z, zth = worst_z(t, np.stack([r.mean for r in rows]), np.stack([r.sigma for r in rows]), log)
     assert z < 4.0 and zth < 4.0, (err, z, zth)
-    counts = live.summary()
-    assert "ranges" in str(counts)
 
 
 def test_the_vectorised_filter_refuses_an_anchored_start():
     """ekf_many does not carry the anchor: it says so rather than filtering without it."""
     from odomgraph.estimators.ekf_many import run_ekf_many
-    with pytest.raises(ValueError, match="long after its start"):
+    with pytest.raises(ValueError, match="anchored there"):
         run_ekf_many([late_range_log(3, 30.0, paper(40.0).with_(slips=()))], Schedule(20.0))

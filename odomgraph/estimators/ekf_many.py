@@ -89,8 +89,8 @@ def run_ekf_many(logs: list[Log], schedule: Schedule = Schedule(), options: EKFO
                          "filter it with ekf.EKF")
     if any(i.anchor is not None for i in inits):
         # (nor is the anchor of a late first fix, ekf.EKF._take_anchor)
-        raise ValueError("run_ekf_many: a run's first fix or range comes long after its start (no [initial] pose); "
-                         "filter it with ekf.EKF")
+        raise ValueError("run_ekf_many: a run's first fix or range comes after the robot drove off (no [initial] "
+                         "pose), and its start is anchored there; filter it with ekf.EKF")
     if len({i.t for i in inits}) != 1:
         raise ValueError("run_ekf_many: the runs start at different times (give robot.toml an [initial] pose)")
     streams = [event_stream(m, inits[0].t) for m in meas]

@@ -13,6 +13,7 @@ measurement; the fit reads up to CONSENSUS_WINDOW seconds of fixes ahead
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import NamedTuple
 
 import numpy as np
 
@@ -33,6 +34,10 @@ _RANGE_WINDOW = 0.6
 #: travel across it widens the fix's sigma.
 _RANGE_WINDOW_MAX = 3.0
 
+
+#: Ranges this much earlier than the first GPS fix are what the start is
+#: fitted to [s] (a GPS receiver's usual start-up leaves the start to GPS).
+_RANGES_FIRST = 5.0
 
 #: The anchor's share of its fixes' information (Anchor): the filter takes
 #: the fixes again at the rest (their variance / (1 - ANCHOR_SHARE)).
@@ -105,7 +110,21 @@ def _wheel_rates(robot: RobotConfig, meas: Measurements):
     return meas.wheel.t, v, w
 
 
-def range_fixes(meas: Measurements, robot: RobotConfig, limit: int | None = 400):
+class RangeFixes(NamedTuple):
+    """Multilateration fixes of the ranging antenna (range_fixes)."""
+    t: np.ndarray
+    """(M,) stamp: the mean time of the fix's ranges [s]."""
+    xy: np.ndarray
+    """(M, 2) antenna position, world frame [m]."""
+    sigma: np.ndarray
+    """(M,) 1-sigma along the worst direction [m]."""
+    lever: tuple[float, float]
+    """The ranging antenna in the robot frame [m]."""
+    newest: np.ndarray
+    """(M,) time of the fix's newest range [s]."""
+
+
+def range_fixes(meas: Measurements, robot: RobotConfig, limit: int | None = 400) -> RangeFixes | None:
     """Multilateration fixes (t, xy, sigma, lever arm) of the ranging antenna
     from the first ``limit`` ranges (all with None), by Gauss-Newton; None
     if no three beacons are ever in range together.
@@ -123,10 +142,10 @@ def range_fixes(meas: Measurements, robot: RobotConfig, limit: int | None = 400)
     started at the origin and put the path 13 m off at z 12000, unflagged.
     """
     t, bxy, rr = meas.ranges
-    out_t, out_p, out_s = [], [], []
+    out_t, out_p, out_s, out_new = [], [], [], []
     latest: dict[tuple, tuple[float, float]] = {}
     sig_r = robot.range_sigma + float(np.hypot(*robot.range_lever_arm))
-    # the antenna's fastest speed over the wheels' measurements since each (upper bound) [m/s]
+    # the antenna's speed by the wheels, with room for their scale factors (an upper bound) [m/s]
     tw = meas.wheel.t
     v_wheel = (np.abs(0.5 * (meas.wheel.m[:, 0] + meas.wheel.m[:, 1]))
                + 0.5 * np.abs(meas.wheel.m[:, 1] - meas.wheel.m[:, 0]) / robot.track_width
@@ -153,18 +172,22 @@ def range_fixes(meas: Measurements, robot: RobotConfig, limit: int | None = 400)
         JtJ = J.T @ J
         if np.linalg.cond(JtJ) > 1e6:
             continue
-        cov = np.linalg.inv(JtJ) * sig_r**2
         tb = np.array([tb for _, _, tb in pts])
-        s = float(np.sqrt(np.max(np.linalg.eigvalsh(cov))))
+        err_r = sig_r
         if slow:
-            sel = (tw >= tb.min() - 0.5) & (tw <= tb.max() + 0.5)
-            v = float(v_wheel[sel].max()) if sel.any() else float(v_wheel.max()) if v_wheel.size else 0.0
-            s = float(np.hypot(s, v * float(np.max(np.abs(tb - tb.mean())))))
-        out_t.append(float(tb.mean())); out_p.append(p); out_s.append(s)
+            # each range's error then holds the travel between it and the stamp,
+            # magnified by the geometry as the ranges' own noise is
+            i0, i1 = np.searchsorted(tw, [tb.min() - 0.5, tb.max() + 0.5])
+            v = float(v_wheel[i0:max(i1, i0 + 1)].max()) if v_wheel.size else 0.0
+            err_r = float(np.hypot(sig_r, v * float(np.max(np.abs(tb - tb.mean())))))
+        cov = np.linalg.inv(JtJ) * err_r**2
+        out_t.append(float(tb.mean())); out_p.append(p); out_s.append(float(np.sqrt(np.max(np.linalg.eigvalsh(cov)))))
+        out_new.append(float(tb.max()))
     if not out_t:
         return None
     order = np.argsort(out_t, kind="stable")
-    return (np.array(out_t)[order], np.array(out_p)[order], np.array(out_s)[order], tuple(robot.range_lever_arm))
+    return RangeFixes(np.array(out_t)[order], np.array(out_p)[order], np.array(out_s)[order],
+                      tuple(robot.range_lever_arm), np.array(out_new)[order])
 
 
 def initial_state(robot: RobotConfig, meas: Measurements, pin: dict[str, str] | None = None) -> InitialState:
@@ -214,13 +237,14 @@ def initial_state(robot: RobotConfig, meas: Measurements, pin: dict[str, str] | 
     fixes, source = None, ""
     if meas.gps is not None:
         fixes, source = (*meas.gps, robot.gps_lever_arm), "GPS"
-    if meas.ranges is not None and (meas.gps is None or meas.ranges[0][0] < meas.gps[0][0] - 1.0):
+    if meas.ranges is not None and (meas.gps is None or meas.ranges[0][0] < meas.gps[0][0] - _RANGES_FIRST):
         # Ranges alone, or long before the first GPS fix: the start is fitted
         # to the first measurements there are (fitted to GPS 40 s on, the
         # filter met 40 s of ranges with a start 10 m and 2 rad wide: z 36).
         rf = range_fixes(meas, robot)
         if rf is not None or fixes is None:
-            fixes, source = rf, "multilateration of the first ranges"
+            fixes = None if rf is None else (rf.t, rf.xy, rf.sigma, rf.lever)
+            source = "multilateration of the first ranges"
     if fixes is None:
         t0 = tw[0]
         msg = ("no absolute sensor and no [initial] pose in robot.toml: the start pose is taken as the origin, "
@@ -232,8 +256,10 @@ def initial_state(robot: RobotConfig, meas: Measurements, pin: dict[str, str] | 
     fit = consensus_pose(tw, meas.wheel.m[:, 0], meas.wheel.m[:, 1], _wheel_dt(meas), robot.track_width, *fixes,
                          pn.initial_scale_sigma, t_first=float(sensor[0][0]))
     if fit.anchor is not None and source != "GPS":
+        # the anchor holds every range of the fit's fixes, up to the newest of the last one's
         from dataclasses import replace
-        fit = replace(fit, anchor=replace(fit.anchor, sensor="ranges"))
+        until = float(rf.newest[rf.t <= fit.anchor.until].max())
+        fit = replace(fit, anchor=replace(fit.anchor, sensor="ranges", until=max(until, fit.anchor.until)))
     return finish(tw[0], fit.pose, fit.cov, f"initial pose from {source}: {fit.note}", fit.warnings,
                   heading_unknown=not fit.moved, anchor=fit.anchor)
 
@@ -518,9 +544,16 @@ def consensus_pose(tw, ml, mr, dtw, track, ft, fp, fs, lever, scale_sigma: float
         rho = min(max(float(np.sum(res[1:] * res[:-1])) / den if den > 0.0 else 0.0, 0.0), 0.9)
         cov_a = Jp @ cov6 @ Jp.T * max(1.0, chi2) * (1.0 + rho) / (1.0 - rho)
         cov_a[2, 2] = max(cov_a[2, 2], amb**2)
-        cov_a += np.diag([floor**2, floor**2, 0.01**2])
+        # Carried back from the window to t_a (ranges from too few beacons
+        # before the first fix), what that can drift, as for the start.
+        s_gap = float(np.interp(W_t[0], t_dr, travel) - np.interp(t_a, t_dr, travel))
+        r_gap = float(np.interp(W_t[0], t_dr, turned) - np.interp(t_a, t_dr, turned))
+        back_a = 2.0 * scale_sigma * s_gap
+        cov_a += np.diag([floor**2 + back_a**2, floor**2 + back_a**2,
+                          0.01**2 + (scale_sigma * r_gap + np.sqrt(2.0) * scale_sigma * s_gap / track) ** 2])
+        cov_a /= ANCHOR_SHARE
         if cov_a[2, 2] < np.pi**2:
-            anchor = Anchor(t_a, np.array([a0[0], a0[1], float(wrap_angle(a0[2]))]), cov_a / ANCHOR_SHARE,
+            anchor = Anchor(t_a, np.array([a0[0], a0[1], float(wrap_angle(a0[2]))]), cov_a,
                             float(W_t[-1]), int(keep.sum()))
     # Dead reckoning's own error back to the first wheel measurement, and a
     # floor for what the rigid-path model leaves out (timing, interpolation).
