@@ -218,3 +218,24 @@ def test_the_vectorised_filter_refuses_an_anchored_start():
     from odomgraph.estimators.ekf_many import run_ekf_many
     with pytest.raises(ValueError, match="anchored there"):
         run_ekf_many([late_range_log(3, 30.0, paper(40.0).with_(slips=()))], Schedule(20.0))
+
+
+def test_an_anchored_stream_resumes_from_its_checkpoint(tmp_path):
+    """An EKF stream whose start took an anchor checkpoints and resumes as
+    if never stopped (the anchor's state is the filter's: a stream's fit
+    sees only its warm-up, so the shared fixes all lie inside it)."""
+    from tests.test_online import _resumed
+    log = late_range_log(9, 20.0, paper(70.0).with_(slips=()), hz=1.0)
+    sch = Schedule(calibrate_until=20.0)
+    lines = list(log_lines(log))
+    live = Online(log.robot, "ekf", sch)
+    ref = []
+    for line in lines:
+        sensor, t, values = parse_line(line)
+        ref += live.push(sensor, t, *values)
+    ref += live.close()
+    assert any(ANCHORED in n for n in live.summary()["notes"])
+    cut = next(k for k, line in enumerate(lines) if float(parse_line(line)[1]) > 60.0)      # after the warm-up
+    first, rows = _resumed(log, sch, lines, cut / len(lines), tmp_path / "ck.pkl", "ekf")
+    assert len(first) > 100 and len(rows) == len(ref)
+    assert all(np.array_equal(a.mean, b.mean) and np.array_equal(a.sigma, b.sigma) for a, b in zip(rows, ref))
