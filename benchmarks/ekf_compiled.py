@@ -199,10 +199,10 @@ class CompiledEKF(EKF):
         kernels()[0](self.x, self.P, dt, self._rates, self._q["v"], self._q["w"])
         self.t = t
 
-    def update(self, z, h, H, idx, R, gate=None, ref=None, no_gain=None) -> float:
+    def update(self, z, h, H, idx, R, gate=None, ref=None, no_gain=None, huber=False) -> float:
         if self.holding_scale or no_gain is not None or self.consider_heading or np.shape(H)[0] > 2:
             # (a modified gain, or the 3-dim scale-hold pseudo-update: the numpy update)
-            return super().update(z, h, H, idx, R, gate, ref, no_gain)
+            return super().update(z, h, H, idx, R, gate, ref, no_gain, huber)
         _, innovate, apply = kernels()
         y = np.atleast_1d(np.asarray(z - h, dtype=float))
         self.last_y = y
@@ -214,5 +214,7 @@ class CompiledEKF(EKF):
             d = y if ref is None else y - ref
             if ref is None or float(d @ Si @ d) > gate:
                 return -nis
+            if huber:       # rescued, at a Huber weight: the numpy update (rare)
+                return super().update(z, h, H, idx, R, gate, ref, no_gain, huber)
         apply(self.x, self.P, y, PHt, Si, H, ix, R)
         return nis

@@ -48,7 +48,7 @@ class FilterPyEKF(EKF):
         fp.predict()
         self.x, self.P, self.t = fp.x, fp.P, t
 
-    def update(self, z, h, H, idx, R, gate=None, ref=None, no_gain=None) -> float:
+    def update(self, z, h, H, idx, R, gate=None, ref=None, no_gain=None, huber=False) -> float:
         assert not self.holding_scale and no_gain is None
         Hfull = np.zeros((H.shape[0], S.N))
         Hfull[:, idx] = H
@@ -61,6 +61,8 @@ class FilterPyEKF(EKF):
             d = y if ref is None else y - ref
             if nis > gate and (ref is None or float(d @ np.linalg.solve(Sm, d)) > gate):
                 return -nis
+            if nis > gate and huber:      # rescued, at a Huber weight (EKF.update)
+                R = R + Sm * (nis / gate - 1.0)
         fp.update(np.atleast_1d(z), lambda x: Hfull, lambda x: h, R=R)
         fp.x[2] = wrap_angle(fp.x[2])
         self.x, self.P = fp.x, fp.P

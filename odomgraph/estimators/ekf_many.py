@@ -166,7 +166,7 @@ def run_ekf_many(logs: list[Log], schedule: Schedule = Schedule(), options: EKFO
         hk = hist.get(key, [])
         return None if len(hk) < 3 else np.median(np.stack(hk), 0)
 
-    def update(z, h, H, idx, R, gate=None, ref=None, no_ref=None, no_gain=None):
+    def update(z, h, H, idx, R, gate=None, ref=None, no_ref=None, no_gain=None, huber=False):
         """Batched Kalman update (see EKF.update); returns (N,) NIS, negative where gated.
         no_ref: (N,) runs that get no rescue from ``ref`` (held out after a jump)."""
         nonlocal x, P, last_y
@@ -177,13 +177,20 @@ def run_ekf_many(logs: list[Log], schedule: Schedule = Schedule(), options: EKFO
         last_y = y
         Sinv = _inv_small(Sm)
         nis = np.einsum("ni,nij,nj->n", y, Sinv, y)
-        K = PHt @ Sinv
         if gate is not None:
             rej = nis > gate
             if ref is not None:
                 d = y - ref
                 far = np.einsum("ni,nij,nj->n", d, Sinv, d) > gate
                 rej &= far if no_ref is None else (far | no_ref)
+            rescued = (nis > gate) & ~rej
+            if huber and rescued.any():
+                # a range taken at a Huber weight, its NIS the gate's (EKF.update)
+                nr = np.where(rescued, nis, gate)
+                R = R + Sm * (nr / gate - 1.0)[:, None, None]
+                Sinv = Sinv * (gate / nr)[:, None, None]
+        K = PHt @ Sinv
+        if gate is not None:
             K[rej] = 0.0
             nis = np.where(rej, -nis, nis)
         if holding:
@@ -262,7 +269,7 @@ def run_ekf_many(logs: list[Log], schedule: Schedule = Schedule(), options: EKFO
                 key = (RANGE, int(m0.ranges_id[i]))
                 R_k = np.broadcast_to(R_rng, (n, 1, 1))
                 nis = update(rng_z[:, i], h, H[:, :, :3], POSE_IDX, R_rng, gates[RANGE], reference(key),
-                             jump_on.get(key))
+                             jump_on.get(key), huber=True)
             else:
                 h, H = velocity.body_velocity(x[:, 3], x[:, 4])                      # sec. VI-B
                 key = (VEL, 0)
