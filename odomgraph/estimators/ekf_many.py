@@ -22,8 +22,9 @@ from odomgraph.factors._math import wrap_angle
 from odomgraph.factors.motion import propagate
 from odomgraph import state as S
 from odomgraph.errors import EstimatorDivergedError
-from odomgraph.estimators.ekf import (GATE_HISTORY, MAX_RECOVERIES, EKFOptions, held_directions,
-                                      gate_thresholds, jumped, make_estimate, reacquire_widening, watch_widening)
+from odomgraph.estimators.ekf import (DEPARTURE_NIS, GATE_HISTORY, MAX_RECOVERIES, EKFOptions, departed,
+                                      departure_note, departure_widening, held_directions, gate_thresholds, jumped,
+                                      make_estimate, reacquire_widening, watch_widening)
 from odomgraph.estimators.sensors import (DOF, ENC_IDX, GATED, GPS, GYRO, GYRO_IDX, POSE_IDX, RANGE, SCALE_IDX,
                                          SENSOR_NAMES, SLIP_IDX, VEL, VEL_IDX, WHEEL, event_stream)
 from odomgraph.estimators.initial import initial_state
@@ -160,6 +161,8 @@ def run_ekf_many(logs: list[Log], schedule: Schedule = Schedule(), options: EKFO
     last_t: dict[tuple, float] = {}
     rearm: dict[tuple, np.ndarray] = {}          # (N,) hold expired: no new jump until one is accepted
     held_t: list[dict[str, list]] = [{} for _ in range(n)]
+    last2: dict[tuple, list] = {}                # (sensor, beacon) -> its last two (t, (N, m) innovations, (N,) |NIS|)
+    last_departure = np.full(n, -np.inf)         # per run (EKF.last_departure)
 
     def reference(key):
         """(N, m) median of the recent innovations (ekf.gate_reference), or None."""
@@ -290,6 +293,24 @@ def run_ekf_many(logs: list[Log], schedule: Schedule = Schedule(), options: EKFO
                         jump_t0.setdefault(key, np.zeros(n))[onset] = t
                         jump_y.setdefault(key, np.zeros_like(last_y))[onset] = hk[-1][onset]
                         on |= onset
+                # A departure: the rate states' variances floored, per run, as in EKF.run (EKF._departure).
+                l2 = last2.setdefault(key, [])
+                if code != VEL and gates[code] is not None and len(l2) == 2 and t > l2[1][0] > l2[0][0]:
+                    (t0, y0, _), (t1, y1, n1) = l2
+                    dep = (np.abs(nis) > gates[code]) & (n1 > DEPARTURE_NIS * DOF[code]) & ~on   # (mostly none)
+                    if dep.any():
+                        dep &= departed((y0, y1, last_y), np.abs(nis), n1, gates[code], DOF[code],
+                                        (t1 - t0, t - t1), R_k, opt.jump_speed)
+                    for j in np.flatnonzero(dep):
+                        idx, floor = departure_widening(last_y[j], y1[j], t - t1, opt.slip_states)
+                        P[j, idx, idx] += np.maximum(floor - np.diagonal(P[j])[idx], 0.0)
+                        note = departure_note(t, code, float(floor), float(last_departure[j]), opt.slip_states)
+                        if note:
+                            recoveries[j].append(note)
+                        last_departure[j] = t
+                l2.append((t, last_y.copy(), np.abs(nis)))
+                if len(l2) > 2:
+                    del l2[0]
                 expire = on & rejected & (t - jump_t0[key] > opt.jump_hold) if on.any() else np.zeros(n, bool)
                 for j in np.flatnonzero(expire):
                     recoveries[j].append(f"t={t:.2f} s: {SENSOR_NAMES[code]} jumped at t={jump_t0[key][j]:.2f} s "
