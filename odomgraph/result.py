@@ -170,6 +170,19 @@ class Estimate:
 DEGRADED_REJECTED = 0.2
 
 
+#: What the EKF's recovery line of a departure says (estimators.ekf.departure_note).
+DEPARTURE_SAYS = "three in a row drift away from the state"
+
+
+def is_departure(line: str) -> bool:
+    """Whether a recovery line is an EKF departure's: the filter followed a
+    step of the robot's (a stall, or its end); it did not lose itself. A
+    departure makes a run "recovered", but it is not counted towards
+    "degraded" (more than 5 recoveries) nor towards the EKF's MAX_RECOVERIES:
+    a plow stuck in a drift six times is six stalls, not a lost filter."""
+    return DEPARTURE_SAYS in line
+
+
 def status_of(est: Estimate) -> tuple[str, list[str]]:
     """("ok" | "recovered" | "degraded", the reasons): recovered when the
     estimator caught itself diverging and recovered; degraded when a flag
@@ -183,8 +196,9 @@ def status_of(est: Estimate) -> tuple[str, list[str]]:
             why.append(f"{s}: {n} of {used} measurements rejected")
     if any("iteration cap" in w for w in est.warnings):
         why.append("an iteration cap was hit")
-    if len(est.recoveries) > 5:
-        why.append(f"{len(est.recoveries)} recoveries")
+    rough = [r for r in est.recoveries if not is_departure(r)]
+    if len(rough) > 5:
+        why.append(f"{len(rough)} recoveries")
     if why:
         return "degraded", why
     if est.recoveries:

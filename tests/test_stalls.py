@@ -9,8 +9,8 @@ Mended in part in the thirteenth session: the EKF floors v's and the slips'
 variances where three growing innovations of one beacon (or of the GPS) say
 the state is leaving what it sees (ekf.departed), and says so (a recovery).
 Designed on paper and yard logs at 2 and 5 Hz a beacon, seeds 1-3, a stall
-at 50-56 s; the logs here have other seeds, rates (3 and 4 Hz a beacon),
-stall times, lengths and speeds, one with GPS as well. Not caught (README
+at 50-56 s; the logs here have other seeds, rates (3-5 Hz a beacon), stall
+times, lengths and speeds, one with GPS as well. Not caught (README
 Known limitations): paper at 3 Hz a beacon, seed 9, a 3 s stall at 0.6 m/s
 (z 7.5, 0.30 m off), and paper with 20 Hz GPS and 2 Hz ranges, seed 11
 (z 12.3, 0.24 m off), both status ok: no sensor shows three growing
@@ -26,7 +26,7 @@ import pytest
 from odomgraph.estimators.ekf import EKFOptions, run_ekf
 from odomgraph.estimators.ekf_many import run_ekf_many
 from odomgraph.pipeline import Schedule
-from odomgraph.result import status_of
+from odomgraph.result import DEPARTURE_SAYS, status_of
 from odomgraph.sim.faults import Faults, Stall, inject
 from odomgraph.sim.scenarios import paper, yard
 from odomgraph.sim.simulate import beacons_around_path
@@ -60,17 +60,19 @@ CASES = {   # (scenario, ranges a beacon [Hz], seed, stall start [s], length [s]
 }
 
 
-@pytest.mark.parametrize("case,bound", [("yard-3Hz", 0.9), ("yard-4Hz-long", 0.8), ("paper-4Hz", 0.45),
+@pytest.mark.parametrize("case,bound", [("yard-3Hz", 0.9), ("yard-4Hz-long", 0.8), ("paper-4Hz", 0.435),
                                         ("yard-gps", 0.27)])
 def test_the_ekf_follows_a_stall_and_says_so(case, bound):
-    """Measured: 0.83, 0.76, 0.43, 0.25 m, each with a recovery naming the
-    departure (before: 1.16, 1.98, 0.44, 0.38 m, three with status ok)."""
+    """The largest position error over the rows. Measured: 0.83, 0.76,
+    0.43, 0.25 m, z 10.8-13.2 (the rows in the second before the third
+    growing innovation), each with a recovery naming the departure (before:
+    1.16, 1.98, 0.44, 0.38 m, z 11.7-18.0, three with status ok)."""
     log = stalled(*CASES[case])
     est = run_ekf(log, Schedule(20.0))
     z, err = position_errors(est, log)
-    assert err <= bound, (z, err)
-    assert status_of(est)[0] != "ok"
-    assert any("drift away from the state" in r for r in est.recoveries), est.recoveries
+    assert err <= bound and z <= 14.0, (z, err)
+    assert status_of(est)[0] == "recovered", status_of(est)
+    assert any(DEPARTURE_SAYS in r for r in est.recoveries), est.recoveries
 
 
 def test_the_vectorised_ekf_follows_the_same_departures():
@@ -88,8 +90,9 @@ def test_the_vectorised_ekf_follows_the_same_departures():
     assert not any("drift away" in r for r in many[1].recoveries)
     a, b = run_ekf(logs[2], Schedule(20.0)), run_ekf_many([logs[2]], Schedule(20.0))[0]
     np.testing.assert_allclose(b.mean, a.mean, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(b.sigma, a.sigma, rtol=0, atol=1e-9)
     assert b.recoveries == a.recoveries
-    assert any(r.startswith("t=45.18 s: gps: three in a row drift away") for r in a.recoveries), a.recoveries
+    assert any(r.startswith("t=45.") and f"gps: {DEPARTURE_SAYS}" in r for r in a.recoveries), a.recoveries
 
 
 def test_a_filter_without_slip_states_keeps_them_out_of_a_departure():
@@ -101,7 +104,26 @@ def test_a_filter_without_slip_states_keeps_them_out_of_a_departure():
     a = run_ekf(log, Schedule(20.0), opt)
     b = run_ekf_many([log], Schedule(20.0), opt)[0]
     assert np.all(a.mean[:, 6:8] == 0.0) and np.all(a.sigma[:, 6:8] == 0.0)
-    assert a.recoveries[0] == ("t=45.07 s: gps: three in a row drift away from the state (a stall, or its end); "
-                               "v widened to 0.96 m/s to follow")
+    first = a.recoveries[0]
+    assert first.startswith("t=45.") and DEPARTURE_SAYS in first and "; v widened to " in first, first
     np.testing.assert_allclose(b.mean, a.mean, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(b.sigma, a.sigma, rtol=0, atol=1e-9)
     assert b.recoveries == a.recoveries
+
+
+def test_stalls_again_and_again_are_not_a_lost_filter():
+    """Each stall's start and end is a departure, said as a recovery: six
+    stalls make a run "recovered", not "degraded" (more than 5 recoveries
+    would), and they do not count towards the EKF's MAX_RECOVERIES
+    (ekf.py: the same count). Measured: 12 departures and nothing else,
+    the largest error 0.86 m (counted, those 12 made it degraded)."""
+    from odomgraph.result import is_departure
+    sc = yard(150.0).with_(slips=())
+    sc = sc.with_(rates=replace(sc.rates, ranges=4.0, gps=0.0))
+    sc = sc.with_(robot=sc.robot.with_(beacons=beacons_around_path(sc, 3)))
+    stalls = tuple(Stall(t, t + 5.0, 1.0, 1.0) for t in (35.0, 55.0, 75.0, 95.0, 115.0, 135.0))
+    log = inject(sc, Faults(stalls=stalls), 12).with_(gps=None)
+    est = run_ekf(log, Schedule(20.0))
+    dep = [r for r in est.recoveries if is_departure(r)]
+    assert len(dep) >= 6 and len(est.recoveries) - len(dep) < 6, est.recoveries
+    assert status_of(est)[0] == "recovered", status_of(est)

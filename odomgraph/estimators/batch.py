@@ -32,7 +32,7 @@ from odomgraph.estimators.keyframes import build_keyframes
 from odomgraph.estimators.measurements import clean, from_log, slip_intensity
 from odomgraph.observability import decondition
 from odomgraph.estimators.slipcheck import in_stretches, in_window
-from odomgraph.result import Estimate
+from odomgraph.result import Estimate, is_departure
 from odomgraph.estimators.schedule import Schedule
 from odomgraph.io.log import Log
 
@@ -631,7 +631,6 @@ def run_batch(log: Log, schedule: Schedule = Schedule(), options: SmootherOption
         prob.kf.gps_sigma[on] = HELD_SIGMA
         if on.any():
             held, held_out = {"gps": int(on.sum())}, {"gps": prob.kf.gps_t[on].copy()}
-    from odomgraph.estimators.ekf import is_departure
     if initial is not None and not all(is_departure(r) for r in initial.recoveries):
         # The filter went through a rough patch: do not start there. A
         # departure is not one (the filter followed a stall); counted as one,

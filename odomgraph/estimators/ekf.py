@@ -38,7 +38,7 @@ from odomgraph.estimators.measurements import (PAUSE_PATH_SHARE, PAUSE_S, PAUSE_
                                                 slip_intensity)
 from odomgraph.observability import decondition, held_pins
 from odomgraph.estimators.slipcheck import in_stretches, in_window
-from odomgraph.result import Estimate, Innovations
+from odomgraph.result import DEPARTURE_SAYS, Estimate, Innovations, is_departure
 from odomgraph.estimators.schedule import Hold, Schedule
 from odomgraph.io.log import Log
 
@@ -116,7 +116,8 @@ class EKFOptions:
     """A GPS fix or range whose innovation steps from the one before faster
     than this [m/s] (plus the noise of both) has jumped, not the state: no
     robot's position error changes that fast. Its sensor is held out
-    (``jump_hold``) instead of re-acquired, until it comes back."""
+    (``jump_hold``) instead of re-acquired, until it comes back. Three
+    growing innovations that step no faster are a departure (``departed``)."""
     jump_hold: float = bounded(JUMP_HOLD, gt=0, infinite=True)
     """How long [s] a jumped sensor is held out before the filter re-acquires
     it anyway (a datum that really moved). A probe's 2 s multipath burst of
@@ -258,7 +259,9 @@ def departed(ys, nis, nis_prev, gate: float, dof: int, dts, R: np.ndarray, speed
     state is leaving what it sees: the last beyond the gate, the one before
     beyond DEPARTURE_NIS per dof, all three in one direction and growing,
     and each step |d| no larger than ``speed`` dt and 3 sigma of the noise
-    of both, added in quadrature. ys: three (..., m) innovations [m], oldest first; nis, nis_prev
+    of both, added in quadrature (for a GPS fix, |d|^2 against 9 times the
+    summed per-axis variance: chi-square with 2 dof at 9, about 2.5 sigma).
+    Innovations: a range's [m], a GPS fix's world x, y [m]. ys: three (..., m) innovations [m], oldest first; nis, nis_prev
     (...): the last two's NIS; dts: the two steps [s]; R (..., m, m): the
     noise. Batched over leading axes (ekf_many); a bool or (...) bools.
 
@@ -299,16 +302,6 @@ def departure_widening(y: np.ndarray, y_prev: np.ndarray, dt: float,
     d = y - y_prev
     idx = np.array([S.V, S.SLIP_L, S.SLIP_R] if slips else [S.V])
     return idx, np.sum(d * d, -1) / (dt * dt)
-
-
-#: What a departure's recovery line says (departure_note, is_departure).
-DEPARTURE_SAYS = "three in a row drift away from the state"
-
-
-def is_departure(line: str) -> bool:
-    """Whether a recovery line is a departure's (departure_note): the filter
-    followed a step of the robot's, it did not lose itself."""
-    return DEPARTURE_SAYS in line
 
 
 def departure_note(t: float, code: int, floor: float, last: float, slips: bool = True) -> str | None:
@@ -460,6 +453,7 @@ class EKF:
         x, P, q = self.x, self.P, self._q
         fresh = [S.V, S.OMEGA] + ([S.SLIP_L, S.SLIP_R] if self.options.slip_states else [])
         start_var = np.diagonal(self.init.P)[fresh]
+        self._prev = {}      # a departure's three innovations do not span a pause
         x[fresh] = 0.0
         P[fresh, :] = 0.0
         P[:, fresh] = 0.0
@@ -882,7 +876,7 @@ class EKF:
         if self._n_seen[code] > 100 and ema > opt.max_mean_nis * DOF[code]:
             what = (f"the running mean NIS of {SENSOR_NAMES[code]} is {ema:.0f} (expected {DOF[code]})")
             widen = watch_widening(code, np.atleast_1d(self.last_y))
-            if widen is None or len(self.recoveries) >= MAX_RECOVERIES:
+            if widen is None or sum(not is_departure(r) for r in self.recoveries) >= MAX_RECOVERIES:
                 raise EstimatorDivergedError(f"EKF diverged at t={t:.3f} s: {what}; the model no longer "
                                              "explains the data")
             # Recover instead of stopping: open up the states that explain

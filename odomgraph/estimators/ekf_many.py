@@ -31,7 +31,7 @@ from odomgraph.estimators.initial import initial_state
 from odomgraph.estimators.measurements import from_log, slip_intensity
 from odomgraph.observability import decondition, held_pins
 from odomgraph.estimators.slipcheck import in_stretches, in_window
-from odomgraph.result import Estimate
+from odomgraph.result import Estimate, is_departure
 from odomgraph.estimators.schedule import Hold, Schedule
 from odomgraph.io.log import Log
 
@@ -348,7 +348,7 @@ def run_ekf_many(logs: list[Log], schedule: Schedule = Schedule(), options: EKFO
             for j in np.nonzero(lost & ~dead)[0]:
                 what = f"the running mean NIS of {SENSOR_NAMES[code]} is {nis_ema[j, code]:.0f} (expected {DOF[code]})"
                 widen = watch_widening(code, np.atleast_1d(last_y[j]))
-                if widen is None or len(recoveries[j]) >= MAX_RECOVERIES:
+                if widen is None or sum(not is_departure(r) for r in recoveries[j]) >= MAX_RECOVERIES:
                     kill(j, f"EKF diverged at t={t:.3f} s: {what}; the model no longer explains the data")
                     continue
                 blk, add = widen                                   # as EKF.run
