@@ -1,5 +1,7 @@
 """The smoother's vectorised linearisation against numerical derivatives of
 its own residuals (through the Pose2 retraction), factor by factor."""
+import math
+
 import numpy as np
 import pytest
 
@@ -20,7 +22,8 @@ def problem():
     sc = paper(30).with_(rates=Rates(gps=20, ranges=5, velocity=5))
     sc = sc.with_(robot=sc.robot.with_(beacons=beacons_around(0, 15, -5, 5)))
     log = simulate(sc, 1)
-    prob = B.build_problem(log, Schedule(10.0), B.SmootherOptions(keyframe_hz=5, slip_cauchy=None, robust="none"))
+    prob = B.build_problem(log, Schedule(10.0), B.SmootherOptions(keyframe_hz=5, slip_cauchy=None, robust="none",
+                                                                         slip_step_k=math.inf))
     prob.speed_ref = np.array([0.97, 1.02, 1.05])      # wheel-speed units in the window (graph.linearize)
     rng = np.random.default_rng(0)
     from odomgraph.estimators.ekf import run_ekf
@@ -76,6 +79,56 @@ def test_robust_slip_rows_have_the_gradient_of_the_cauchy_cost():
         A1, A2, b = B.factor_arrays(prob, lin)
         grad = -(A1[k][:, j] @ b[k]) - (A2[k - 1][:, j] @ b[k - 1])
         assert grad == pytest.approx(grad_num, rel=1e-4, abs=1e-6)
+
+
+def test_slip_split_is_the_common_mode_and_differential_steps_whitened_alone():
+    """RandomWalkSteps.slip_split rotates the slips' whitened rows into c =
+    (sL + sR)/2 over its sigma and d = sR - sL over its: orthogonal (the cost
+    unchanged), and each row one of the two steps (slip_intensity's p = 0.05,
+    q_d = 0.02 m/s per sqrt s without a gyro)."""
+    from odomgraph.estimators.graph import WSL
+    from odomgraph.io.robot import ProcessNoise
+    from odomgraph.estimators.graph import RandomWalkSteps
+    p, qd = 0.05, 0.02
+    q = p**2 * np.ones((2, 2)) + 0.25 * qd**2 * np.array([[1.0, -1.0], [-1.0, 1.0]])
+    rw = RandomWalkSteps.of(ProcessNoise(), q, np.array([0.2]))
+    R = rw.slip_split
+    np.testing.assert_allclose(R @ R.T, np.eye(2), atol=1e-12)
+    rows = R @ rw.unit_whiten[WSL, WSL]
+    np.testing.assert_allclose(rows, [[0.5 / p, 0.5 / p], [-1 / qd, 1 / qd]], rtol=1e-12)
+
+
+def test_huber_slip_steps_have_the_gradient_of_their_cost():
+    """batch's default Huber on the common-mode slip step (graph.SLIP_STEP_K):
+    its IRLS rows descend the cost the line search evaluates, with steps far
+    beyond k (a stall's) at every block tested, and the cost is the Huber loss
+    of the common-mode step plus the Gaussian differential's."""
+    log = simulate(paper(30), 2)
+    prob = B.build_problem(log, Schedule(10.0), B.SmootherOptions(keyframe_hz=5, slip_cauchy=None))
+    assert prob.slip_step_k == 2.0
+    from odomgraph.estimators.ekf import run_ekf
+    from odomgraph.estimators.graph import WSL, walk_rows
+    pose, W = B.initial_guess(prob, run_ekf(log, Schedule(10.0)))
+    W[:, 3:5] += np.random.default_rng(4).normal(0, 0.3, (len(W), 2))     # steps of ~10 sigma
+    A0, A1, bw, extra = walk_rows(prob, W, 0, prob.kf.n - 1)
+    gauss = B.build_problem(log, Schedule(10.0), B.SmootherOptions(keyframe_hz=5, slip_cauchy=None,
+                                                                    slip_step_k=math.inf))
+    gauss.speed_ref = prob.speed_ref
+    _, _, bg, zero = walk_rows(gauss, W, 0, prob.kf.n - 1)
+    assert zero == 0.0
+    u = (bg[:, WSL] @ prob.rw.slip_split.T)                 # (common, differential) whitened steps
+    huber = np.where(np.abs(u[:, 0]) <= 2, 0.5 * u[:, 0] ** 2, 2 * (np.abs(u[:, 0]) - 1))
+    assert np.mean(np.abs(u[:, 0]) > 2) > 0.5
+    assert 0.5 * np.sum(bw[:, WSL] ** 2) + extra == pytest.approx(np.sum(huber + 0.5 * u[:, 1] ** 2), rel=1e-12)
+    lin = linearize(prob, pose, W)
+    A1f, A2f, b = B.factor_arrays(prob, lin)
+    for k in (5, 60, 120):
+        for j in (3, 6, 7, 8, 9):        # v, the slips, the wheels' scales
+            d = np.zeros((prob.kf.n, NB))
+            d[k, j] = 1e-7
+            num = (linearize(prob, *B.retract(pose, W, d)).cost - linearize(prob, *B.retract(pose, W, -d)).cost) / 2e-7
+            grad = -(A1f[k][:, j] @ b[k]) - (A2f[k - 1][:, j] @ b[k - 1])
+            assert grad == pytest.approx(num, rel=1e-4, abs=1e-5)
 
 
 @pytest.mark.parametrize("kind", ["huber", "cauchy"])

@@ -26,7 +26,7 @@ from odomgraph.factors.motion import arc_at, propagate, velocity_between
 from odomgraph import state as S
 from odomgraph.checks import bounded, check_fields
 from odomgraph.errors import EstimatorDivergedError
-from odomgraph.estimators.graph import NB, Linearization, Problem, linearize, robust_counts
+from odomgraph.estimators.graph import NB, SLIP_STEP_K, Linearization, Problem, linearize, robust_counts
 from odomgraph.estimators.initial import initial_state
 from odomgraph.estimators.keyframes import build_keyframes
 from odomgraph.estimators.measurements import clean, from_log, slip_intensity
@@ -60,6 +60,11 @@ class GraphOptions:
     velocity_loss: str | None = bounded(None, choices=("huber", "cauchy"), optional=True)
     """Robust loss of the velocity random walk ("huber", "cauchy"; None: Gaussian).
     For robots whose speed jumps (in-place pivots started and stopped at once)."""
+    slip_step_k: float = bounded(SLIP_STEP_K, gt=0, infinite=True)
+    """Huber threshold [sigma] of the slips' common-mode random-walk step: a
+    wheel that starts or stops spinning (a stall) steps its slip within a
+    second, which Gaussian steps spread over several (graph.SLIP_STEP_K).
+    inf: Gaussian steps, as the EKF's random walk."""
     pin: tuple[tuple[str, str], ...] = ()
     """(scale combination, reason) pairs to hold at nominal with their prior
     sigma, as if the log could not determine them (observability)."""
@@ -106,7 +111,8 @@ def build_problem(log: Log, schedule: Schedule, options: GraphOptions, causal: b
     loss = None if options.robust in (None, "none") else options.robust
     return Problem(kf, log.robot, mean, cov, zero, robust, slip_intensity(log.robot.process, meas), loss,
                    options.robust_k, options.range_bias_sigma if options.range_bias else None,
-                   options.velocity_loss, init=init, spikes=dict(meas.spikes), meas=meas)
+                   options.velocity_loss, slip_step_k=options.slip_step_k, init=init,
+                   spikes=dict(meas.spikes), meas=meas)
 
 
 def zero_slip_intervals(t: np.ndarray, init, t_start: float, schedule: Schedule) -> np.ndarray:

@@ -26,6 +26,7 @@ so that the Gauss-Newton step minimises ||A d - b||^2.
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -80,6 +81,9 @@ class Problem:
     global variable (a vector, one entry per robot.beacons); None: no bias."""
     velocity_loss: str | None = None
     """Robust loss ("huber" or "cauchy") of the v and omega random-walk steps; None: Gaussian."""
+    slip_step_k: float = math.inf
+    """Huber threshold [sigma] of the slips' common-mode random-walk step
+    (walk_rows, SLIP_STEP_K); inf: Gaussian, as the EKF's random walk."""
     speed_ref: np.ndarray | None = None
     """(3,) scale factors that define wheel-speed units for the random walks
     (see linearize; batch: the initial guess). None: plain walks."""
@@ -171,6 +175,20 @@ class RandomWalkSteps:
         Q = cls.unit_cov(pn, q_slip)
         return cls(Q, np.linalg.inv(np.linalg.cholesky(Q)), span)
 
+    @property
+    def slip_split(self) -> np.ndarray:
+        """(2, 2) orthogonal R: R times unit_whiten's slip rows gives the row
+        of the common-mode step c = (sL + sR) / 2 whitened alone (first) and
+        the differential step d = sR - sL whitened alone (second). The slip
+        block is p^2 11^T + q_d^2 / 4 [[1, -1], [-1, 1]]
+        (measurements.slip_intensity), so c and d are independent with
+        variances p^2 and q_d^2 per second, and the pair of rows costs what
+        the joint whitened step costs."""
+        Q = self.unit[WSL, WSL]
+        p2, qd2 = 0.5 * (Q[0, 0] + Q[0, 1]), 2.0 * (Q[0, 0] - Q[0, 1])
+        M = np.array([[0.5, 0.5], [-1.0, 1.0]]) / np.sqrt([[p2], [qd2]])
+        return M @ np.linalg.inv(self.unit_whiten[WSL, WSL])
+
     def cov(self, k) -> np.ndarray:
         """(8, 8) covariance of interval k's step (or (K, 8, 8) for a slice)."""
         return np.multiply.outer(self.span[k], self.unit)
@@ -186,6 +204,17 @@ class RandomWalkSteps:
 ROBUST_K = {"huber": 1.345, "cauchy": 5.0}
 #: Thresholds of the robust velocity random walk (95 % efficiency).
 VELOCITY_LOSS_K = {"huber": 1.345, "cauchy": 2.385}
+#: Default Huber threshold [sigma] of the slips' common-mode random-walk step
+#: (GraphOptions.slip_step_k, walk_rows). A stall (the robot held while its
+#: wheels spin) steps the common-mode slip by the wheels' speed within a
+#: second; a Gaussian step cost spreads that step over seconds. Measured in
+#: the thirteenth session (branch wip/slip-huber, batch): range-only 6 s
+#: stalls z 4-7 and 3-9 cm at 2 (z 10-20, 0.13-0.27 m Gaussian); slip RMS
+#: 15-45 % lower on the paper and yard logs. At 1.345 a stall under a frozen
+#: receiver (tests/test_honesty.py) zig-zagged (rows 0.34 m off at z 9). The
+#: differential step stays Gaussian: a Huber on the joint step let a range
+#: bias slide under its floor (libRSF beacon 107, tests).
+SLIP_STEP_K = 2.0
 
 
 def robust_weight(u: np.ndarray, kind: str, k: float):
@@ -245,11 +274,15 @@ class Linearization:
 
 
 def walk_rows(prob: Problem, W: np.ndarray, k0: int, k1: int):
-    """(A_w0, A_w1, b_w): the whitened random-walk rows of W from keyframe k
-    to k+1 for k in [k0, k1), (n, 8, 8) Jacobians on W_k and W_{k+1} and
-    (n, 8) right-hand sides, in wheel-speed units when the scale factors are
-    anchored (Problem.wheel_speed_units). Shared by batch (linearize) and the
-    incremental smoothers, which give GTSAM the same rows."""
+    """(A_w0, A_w1, b_w, cost): the whitened random-walk rows of W from
+    keyframe k to k+1 for k in [k0, k1), (n, 8, 8) Jacobians on W_k and
+    W_{k+1} and (n, 8) right-hand sides, in wheel-speed units when the scale
+    factors are anchored (Problem.wheel_speed_units); with a finite
+    Problem.slip_step_k the slips' rows are the common-mode and differential
+    steps (RandomWalkSteps.slip_split), the first Huber-weighted, and
+    ``cost`` is its true loss less its weighted square (else 0). Shared by
+    batch (linearize) and the incremental smoothers, which give GTSAM the
+    same rows."""
     w0, w1 = W[k0:k1], W[k0 + 1:k1 + 1]
     A_w = prob.rw.whiten(slice(k0, k1))
     b_w = -np.einsum("kij,kj->ki", A_w, w1 - w0)
@@ -286,7 +319,25 @@ def walk_rows(prob: Problem, W: np.ndarray, k0: int, k1: int):
         A_w0[:, WSL, WWS] = -L * (w0[:, WSL] / ref[0:2])[:, None, :]
         A_w1[:, WSL, WSL] = L * sc1[:, None, 0:2]
         A_w1[:, WSL, WWS] = L * (w1[:, WSL] / ref[0:2])[:, None, :]
-    return A_w0, A_w1, b_w
+    cost = 0.0
+    if math.isfinite(prob.slip_step_k):
+        # Slip is not a slow random walk: a wheel grips or spins, and a stall
+        # starts and ends within a second. Huber on the common-mode step costs
+        # such a step linearly beyond k sigma, so it is taken where the data
+        # put it, and its IRLS weight k/|u| leaves the states there as
+        # uncertain as the data leave them (batch's covariance).
+        R = prob.rw.slip_split
+        A_w0, A_w1 = A_w0.copy(), A_w1.copy()
+        A_w0[:, WSL, :] = np.einsum("ij,kjl->kil", R, A_w0[:, WSL, :])
+        A_w1[:, WSL, :] = np.einsum("ij,kjl->kil", R, A_w1[:, WSL, :])
+        b_w[:, WSL] = b_w[:, WSL] @ R.T
+        c = WSL.start
+        sw, rho = robust_weight(b_w[:, c], "huber", prob.slip_step_k)
+        cost = float(np.sum(rho - 0.5 * (sw * b_w[:, c]) ** 2))
+        A_w0[:, c, :] *= sw[:, None]
+        A_w1[:, c, :] *= sw[:, None]
+        b_w[:, c] *= sw
+    return A_w0, A_w1, b_w, cost
 
 
 def slip_prior_rows(prob: Problem, w: np.ndarray, zero: np.ndarray):
@@ -449,7 +500,8 @@ def linearize(prob: Problem, pose: np.ndarray, W: np.ndarray, k0: int = 0, k1: i
     A_m1 = pose2.to_body(J1, nxt[:, 2]) * sm[:, :, None]
 
     # --- random walk of W, in wheel-speed units when the scale factors are anchored.
-    A_w0, A_w1, b_w = walk_rows(prob, W, k0, k1)
+    A_w0, A_w1, b_w, walk_cost = walk_rows(prob, W, k0, k1)
+    robust_cost += walk_cost
     if prob.velocity_loss is not None:
         # Robust velocity steps: a robot whose commanded speed jumps (pivots
         # starting and stopping within one encoder period) breaks the Gaussian
