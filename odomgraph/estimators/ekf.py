@@ -254,6 +254,21 @@ def reacquire_widening(code: int, Y: np.ndarray) -> tuple[slice, np.ndarray]:
 DEPARTURE_NIS = 9.0
 
 
+def departure_possible(nis, nis_prev, gate: float, dof: int):
+    """The departure test's cheap half (``departed``'s first condition), on
+    its own so the filters can skip the rest at once: the last NIS beyond the
+    gate and the one before beyond DEPARTURE_NIS per dof. A bool or (...) bools."""
+    return (nis > gate) & (nis_prev > DEPARTURE_NIS * dof)
+
+
+def huber_widening(R: np.ndarray, Sm: np.ndarray, Sinv: np.ndarray, nis, gate: float):
+    """(R, S^-1) of a measurement taken at a Huber weight: its noise widened
+    until its NIS is the gate's (EKF.update's rescued ranges; ekf_many
+    batched). R, Sm (innovation covariance), Sinv (..., m, m); nis (...)
+    beyond the gate."""
+    return R + Sm * (np.asarray(nis / gate)[..., None, None] - 1.0), Sinv * np.asarray(gate / nis)[..., None, None]
+
+
 def departed(ys, nis, nis_prev, gate: float, dof: int, dts, R: np.ndarray, speed: float):
     """Whether a sensor's (or a beacon's) last three innovations say the
     state is leaving what it sees: the last beyond the gate, the one before
@@ -273,7 +288,7 @@ def departed(ys, nis, nis_prev, gate: float, dof: int, dts, R: np.ndarray, speed
     like-signed ones in a row, growing, are rare (20 % outliers of either
     sign: about one range in 2000). Taken on two in a row, 2 of the 16
     logs with 20 % range outliers in tests/test_range_outliers.py failed."""
-    ok = (nis > gate) & (nis_prev > DEPARTURE_NIS * dof)
+    ok = departure_possible(nis, nis_prev, gate, dof)
     m = ys[0].shape[-1]
     n2 = 18.0 * np.trace(R, axis1=-2, axis2=-1) / m       # (3 sigma)^2 of a difference of two
     for (p, q), dt in zip(((ys[0], ys[1]), (ys[1], ys[2])), dts):
@@ -529,8 +544,7 @@ class EKF:
                 # plane and hardly ever line up, and a fix rescued after a
                 # silence is taken whole: weighted, the rows 5 s after a 15 s
                 # silence were 0.27 m off where they were under 0.2.
-                R = R + Sm * (nis / gate - 1.0)
-                Sinv = Sinv * (gate / nis)
+                R, Sinv = huber_widening(R, Sm, Sinv, nis, gate)
         K = PHt @ Sinv
         if self.holding_scale:
             K[SCALE_IDX, :] = 0.0
@@ -856,7 +870,7 @@ class EKF:
         before, (t, innovation, |NIS|) each."""
         (t0, y0, _), (t1, y1, nis1) = last
         gate = self._gates[code]
-        if (gate is None or nis <= gate or nis1 <= DEPARTURE_NIS * DOF[code]       # (the common case, at once)
+        if (gate is None or not departure_possible(nis, nis1, gate, DOF[code])     # (the common case, at once)
                 or not departed((y0, y1, y), nis, nis1, gate, DOF[code], (t1 - t0, t - t1), R,
                                 self.options.jump_speed)):
             return

@@ -22,9 +22,9 @@ from odomgraph.factors._math import wrap_angle
 from odomgraph.factors.motion import propagate
 from odomgraph import state as S
 from odomgraph.errors import EstimatorDivergedError
-from odomgraph.estimators.ekf import (DEPARTURE_NIS, GATE_HISTORY, MAX_RECOVERIES, EKFOptions, departed,
-                                      departure_note, departure_widening, held_directions, gate_thresholds, jumped,
-                                      make_estimate, reacquire_widening, watch_widening)
+from odomgraph.estimators.ekf import (GATE_HISTORY, MAX_RECOVERIES, EKFOptions, departed, departure_note,
+                                      departure_possible, departure_widening, gate_thresholds, held_directions,
+                                      huber_widening, jumped, make_estimate, reacquire_widening, watch_widening)
 from odomgraph.estimators.sensors import (DOF, ENC_IDX, GATED, GPS, GYRO, GYRO_IDX, POSE_IDX, RANGE, SCALE_IDX,
                                          SENSOR_NAMES, SLIP_IDX, VEL, VEL_IDX, WHEEL, event_stream)
 from odomgraph.estimators.initial import initial_state
@@ -189,9 +189,7 @@ def run_ekf_many(logs: list[Log], schedule: Schedule = Schedule(), options: EKFO
             rescued = (nis > gate) & ~rej
             if huber and rescued.any():
                 # a range taken at a Huber weight, its NIS the gate's (EKF.update)
-                nr = np.where(rescued, nis, gate)
-                R = R + Sm * (nr / gate - 1.0)[:, None, None]
-                Sinv = Sinv * (gate / nr)[:, None, None]
+                R, Sinv = huber_widening(R, Sm, Sinv, np.where(rescued, nis, gate), gate)
         K = PHt @ Sinv
         if gate is not None:
             K[rej] = 0.0
@@ -297,7 +295,7 @@ def run_ekf_many(logs: list[Log], schedule: Schedule = Schedule(), options: EKFO
                 l2 = last2.setdefault(key, [])
                 if code != VEL and gates[code] is not None and len(l2) == 2 and t > l2[1][0] > l2[0][0]:
                     (t0, y0, _), (t1, y1, n1) = l2
-                    dep = (np.abs(nis) > gates[code]) & (n1 > DEPARTURE_NIS * DOF[code]) & ~on   # (mostly none)
+                    dep = departure_possible(np.abs(nis), n1, gates[code], DOF[code]) & ~on   # (mostly none)
                     if dep.any():
                         dep &= departed((y0, y1, last_y), np.abs(nis), n1, gates[code], DOF[code],
                                         (t1 - t0, t - t1), R_k, opt.jump_speed)
