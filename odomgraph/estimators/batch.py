@@ -510,7 +510,7 @@ def marginal_blocks(prob: Problem, pose: np.ndarray, W: np.ndarray, range_bias: 
         Sigma_k  = R^-1 R^-T + A Sigma_yy A^T,   Sigma_kg = -A Sigma_yg,   A = R^-1 S,
     with y the conditional's parents. Then returns (blocks, Sigma_gg).
     """
-    lin = linearize(prob, pose, W, range_bias=range_bias)
+    lin = linearize(prob, pose, W, range_bias=range_bias, laplace=True)
     g = gaussian_graph(prob, lin)
     n, nb = prob.kf.n, prob.n_bias
     bn = g.eliminateSequential(time_ordering(n, 1 if nb else 0), gtsam.EliminateQR)
