@@ -75,7 +75,10 @@ class FilterPyEKF(EKF):
 # gtsam.CustomFactors (factors/gtsam_factors.py), solved by GTSAM's own
 # LevenbergMarquardtOptimizer or by one ISAM2 update per keyframe.
 def straightforward_graph(prob, k0: int = 0, k1: int | None = None):
-    """NonlinearFactorGraph of intervals k0..k1-1 (plus the prior when k0 == 0)."""
+    """NonlinearFactorGraph of intervals k0..k1-1 (plus the prior when k0 == 0).
+    The slips' random walk is Gaussian here (isam2's built-in BetweenFactor),
+    where batch weighs its common-mode step by a Huber loss (graph.walk_rows):
+    one row an interval reweighted, the same work per iteration."""
     import gtsam
     from gtsam.symbol_shorthand import S as SK, W as WK, X as XK
     from odomgraph.factors import gtsam_factors as gf

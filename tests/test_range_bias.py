@@ -52,7 +52,7 @@ def test_marginals_with_the_bias_variable_equal_the_dense_inverse():
     pose, W = B.initial_guess(prob, run_ekf(log, Schedule(20.0)))
     rb = np.array([0.1, -0.05, 0.2])
     Sig, Sgg = B.marginal_blocks(prob, pose, W, rb)
-    lin = B.linearize(prob, pose, W, range_bias=rb)
+    lin = B.linearize(prob, pose, W, range_bias=rb, laplace=True)      # as marginal_blocks
     g = B.gaussian_graph(prob, lin)
     n = prob.kf.n
     H, _ = g.hessian(B.time_ordering(n, 1))

@@ -169,3 +169,26 @@ def test_huber_slip_steps_are_a_batch_option():
     for method in ("isam2", "fixed-lag"):
         with pytest.raises(OdomgraphError, match=r"Huber slip steps \(slip_step_k\) are batch-smoother options"):
             estimate(log, method, Schedule(20.0), slip_step_k=2.0)
+
+
+@pytest.mark.parametrize("seed", [52, 61])
+def test_without_a_gyro_batch_keeps_gaussian_slip_steps(seed):
+    """A yard log without a gyro (GPS 5 Hz), one wheel slipping at a time
+    (right +0.5 m/s over 60-63 s, left +0.8 over 100-102 s). A second read
+    (helper, fourteenth session) found that with Huber slip steps batch read
+    the left wheel's slip as a spin in place (both slips +2 m/s, the heading
+    3 rad off, rows 0.72-0.77 m off at z 40-43) and said `ok` on seeds 52, 53,
+    54 and 61, where Gaussian steps flag the run (the sideways check). Without
+    a yaw-rate sensor, the default (slip_step_k None) is Gaussian steps: the
+    same run as slip_step_k inf, flagged."""
+    import math
+    from odomgraph.estimators.batch import build_problem, SmootherOptions
+    from odomgraph.pipeline import estimate
+    from odomgraph.sim.scenarios import SlipEvent
+    sc = yard(150.0)
+    sc = sc.with_(rates=replace(sc.rates, gyro=0.0, gps=5.0),
+                  slips=(SlipEvent("right", 60, 63, 0.5, 0.1), SlipEvent("left", 100, 102, 0.8, 0.1)))
+    log = inject(sc, Faults(), seed).with_(gyro=None)
+    assert math.isinf(build_problem(log, Schedule(30.0), SmootherOptions()).slip_step_k)
+    est = estimate(log, "batch", Schedule(30.0))
+    assert status_of(est)[0] == "degraded", status_of(est)

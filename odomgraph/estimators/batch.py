@@ -14,6 +14,7 @@ also linear, where GTSAM's Marginals would query the Bayes tree key by key.
 """
 from __future__ import annotations
 
+import math
 import time
 from dataclasses import dataclass
 
@@ -29,7 +30,7 @@ from odomgraph.errors import EstimatorDivergedError
 from odomgraph.estimators.graph import NB, SLIP_STEP_K, Linearization, Problem, linearize, robust_counts
 from odomgraph.estimators.initial import initial_state
 from odomgraph.estimators.keyframes import build_keyframes
-from odomgraph.estimators.measurements import clean, from_log, slip_intensity
+from odomgraph.estimators.measurements import clean, from_log, slip_intensity, yaw_rate_sensed
 from odomgraph.observability import decondition
 from odomgraph.estimators.slipcheck import in_stretches, in_window
 from odomgraph.result import Estimate, is_departure
@@ -60,11 +61,16 @@ class GraphOptions:
     velocity_loss: str | None = bounded(None, choices=("huber", "cauchy"), optional=True)
     """Robust loss of the velocity random walk ("huber", "cauchy"; None: Gaussian).
     For robots whose speed jumps (in-place pivots started and stopped at once)."""
-    slip_step_k: float = bounded(SLIP_STEP_K, gt=0, infinite=True)
+    slip_step_k: float | None = bounded(None, gt=0, infinite=True, optional=True)
     """Huber threshold [sigma] of the slips' common-mode random-walk step: a
     wheel that starts or stops spinning (a stall) steps its slip within a
     second, which Gaussian steps spread over several (graph.SLIP_STEP_K).
-    inf: Gaussian steps, as the EKF's random walk."""
+    inf: Gaussian steps, as the EKF's random walk. None: SLIP_STEP_K where a
+    yaw-rate sensor covers the log (measurements.yaw_rate_sensed), Gaussian
+    where none does: there a cheap common-mode step let a one-wheel slip be
+    read as a spin in place (a yard log without a gyro, GPS at 5 Hz, a 0.8 m/s
+    slip of one wheel: both slips +2 m/s, the heading 3 rad off, rows 0.75 m
+    off at z 40, status ok; Gaussian steps: flagged)."""
     pin: tuple[tuple[str, str], ...] = ()
     """(scale combination, reason) pairs to hold at nominal with their prior
     sigma, as if the log could not determine them (observability)."""
@@ -109,9 +115,12 @@ def build_problem(log: Log, schedule: Schedule, options: GraphOptions, causal: b
         from odomgraph.errors import OdomgraphError
         raise OdomgraphError("--range-bias: the log has no ranges to estimate a bias from")
     loss = None if options.robust in (None, "none") else options.robust
+    step_k = options.slip_step_k
+    if step_k is None:
+        step_k = SLIP_STEP_K if yaw_rate_sensed(meas) else math.inf
     return Problem(kf, log.robot, mean, cov, zero, robust, slip_intensity(log.robot.process, meas), loss,
                    options.robust_k, options.range_bias_sigma if options.range_bias else None,
-                   options.velocity_loss, slip_step_k=options.slip_step_k, init=init,
+                   options.velocity_loss, slip_step_k=step_k, init=init,
                    spikes=dict(meas.spikes), meas=meas)
 
 

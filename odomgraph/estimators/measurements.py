@@ -142,6 +142,14 @@ def coverage(sensor, t: np.ndarray, reach: float = 0.5) -> float:
     return float(np.mean(near <= reach))
 
 
+def yaw_rate_sensed(meas: Measurements) -> bool:
+    """Whether a yaw-rate sensor (a gyro, or a velocity sensor's yaw rate)
+    covers at least half the log (``coverage``): then the slips' differential
+    is free to step (slip_intensity) and the heading does not hang on the
+    wheels' difference alone (batch's Huber slip steps, batch.build_problem)."""
+    return max(coverage(meas.gyro, meas.wheel.t), coverage(meas.velocity, meas.wheel.t)) >= 0.5
+
+
 def slip_intensity(process, meas: Measurements) -> np.ndarray:
     """(2, 2) slip random-walk intensity in (left, right) [(m/s)^2/s], for the EKF and the smoothers.
 
@@ -152,7 +160,7 @@ def slip_intensity(process, meas: Measurements) -> np.ndarray:
     """
     q_d = process.slip_differential
     if q_d is None:
-        q_d = 1.0 if max(coverage(meas.gyro, meas.wheel.t), coverage(meas.velocity, meas.wheel.t)) >= 0.5 else 0.02
+        q_d = 1.0 if yaw_rate_sensed(meas) else 0.02
     return process.slip**2 * np.ones((2, 2)) + 0.25 * q_d**2 * np.array([[1.0, -1.0], [-1.0, 1.0]])
 
 
