@@ -43,6 +43,7 @@ def run_comparison(log: Log, schedule: Schedule, progress_for=None, **options) -
     from odomgraph.io.log import rebased
     log = rebased(log)  # Log.t_origin
     from odomgraph.estimators.ekf import EKFOptions, run_ekf
+    from odomgraph.estimators.incremental import BATCH_ONLY
     if schedule.calibrate_until is None:
         raise OdomgraphError("compare runs the EKF, which needs a schedule: use --calibrate-until SECONDS "
                              "(0 = slip only), not 'none'")
@@ -59,7 +60,7 @@ def run_comparison(log: Log, schedule: Schedule, progress_for=None, **options) -
             return None
 
     for label, method in (("ekf", Method.ekf), ("isam2", Method.isam2), ("batch", Method.batch)):
-        opts = options if method is Method.batch else {k: v for k, v in options.items() if k != "range_bias"}
+        opts = options if method is Method.batch else {k: v for k, v in options.items() if k not in BATCH_ONLY}
         est = attempt(label, lambda: estimate(log, method, schedule, prog(label), **opts))
         if est is None:
             if label == "isam2":

@@ -181,3 +181,15 @@ def test_a_diverging_estimator_is_reported_not_fatal(tmp_path, short_log_dir, mo
     assert "isam2" not in names and "batch" in names and "ekf" in names
     page = (tmp_path / "rep" / "report.html").read_text()
     assert "<b>isam2 diverged</b>" in page
+
+
+def test_batch_only_options_go_to_batch_alone():
+    """compare gives batch's own options (a finite slip_step_k, a robust
+    velocity walk) to batch and leaves them out of isam2's, which refuses them
+    (a second read found the comparison stopped on them)."""
+    from odomgraph.estimators.incremental import BATCH_ONLY
+    from odomgraph.runs import compare
+    assert set(BATCH_ONLY) == {"range_bias", "velocity_loss", "slip_step_k"}
+    log = simulate(paper(30), 3)
+    c = compare(log, Schedule(20.0), slip_step_k=3.0, velocity_loss="huber")
+    assert {"ekf", "isam2", "isam2-online", "batch"} <= set(c.estimates), c

@@ -98,17 +98,35 @@ def test_slip_split_is_the_common_mode_and_differential_steps_whitened_alone():
     np.testing.assert_allclose(rows, [[0.5 / p, 0.5 / p], [-1 / qd, 1 / qd]], rtol=1e-12)
 
 
-def test_huber_slip_steps_have_the_gradient_of_their_cost():
+def test_robust_curvature_is_the_second_derivative_of_the_loss():
+    """The covariance's weights (graph.robust_curvature) against a numerical
+    second derivative of robust_weight's loss, floored at LAPLACE_FLOOR."""
+    from odomgraph.estimators.graph import LAPLACE_FLOOR, robust_curvature, robust_weight
+    u = np.array([0.1, 0.9, 1.3, 1.9, 2.1, 2.5, 4.0, 30.0])
+    for kind, k in (("huber", 2.0), ("cauchy", 2.385)):
+        h = 1e-4
+        rho = lambda x: robust_weight(x, kind, k)[1]
+        num = (rho(u + h) - 2 * rho(u) + rho(u - h)) / h**2
+        np.testing.assert_allclose(robust_curvature(u, kind, k) ** 2, np.maximum(num, LAPLACE_FLOOR**2),
+                                   rtol=1e-5, atol=1e-6)
+
+
+@pytest.mark.parametrize("units", [False, True])
+def test_huber_slip_steps_have_the_gradient_of_their_cost(units):
     """batch's default Huber on the common-mode slip step (graph.SLIP_STEP_K):
     its IRLS rows descend the cost the line search evaluates, with steps far
     beyond k (a stall's) at every block tested, and the cost is the Huber loss
-    of the common-mode step plus the Gaussian differential's."""
+    of the common-mode step plus the Gaussian differential's; with plain
+    walks and in wheel-speed units."""
     log = simulate(paper(30), 2)
     prob = B.build_problem(log, Schedule(10.0), B.SmootherOptions(keyframe_hz=5, slip_cauchy=None))
     assert prob.slip_step_k == 2.0
     from odomgraph.estimators.ekf import run_ekf
     from odomgraph.estimators.graph import WSL, walk_rows
     pose, W = B.initial_guess(prob, run_ekf(log, Schedule(10.0)))
+    if units:
+        prob.speed_ref = np.array([0.97, 1.02, 1.05])      # wheel-speed units in the window (graph.linearize)
+    assert prob.wheel_speed_units == units
     W[:, 3:5] += np.random.default_rng(4).normal(0, 0.3, (len(W), 2))     # steps of ~10 sigma
     A0, A1, bw, extra = walk_rows(prob, W, 0, prob.kf.n - 1)
     gauss = B.build_problem(log, Schedule(10.0), B.SmootherOptions(keyframe_hz=5, slip_cauchy=None,

@@ -207,17 +207,36 @@ VELOCITY_LOSS_K = {"huber": 1.345, "cauchy": 2.385}
 #: Default Huber threshold [sigma] of the slips' common-mode random-walk step
 #: (GraphOptions.slip_step_k, walk_rows). A stall (the robot held while its
 #: wheels spin) steps the common-mode slip by the wheels' speed within a
-#: second; a Gaussian step cost spreads that step over seconds. Measured in
-#: the thirteenth session (branch wip/slip-huber, batch): range-only 6 s
-#: stalls z 4-7 and 3-9 cm at 2 (z 10-20, 0.13-0.27 m Gaussian); slip RMS
-#: 15-45 % lower on the paper and yard logs. At 1.345 a stall under a frozen
-#: receiver (tests/test_honesty.py) zig-zagged (rows 0.34 m off at z 9). The
-#: differential step stays Gaussian: a Huber on the joint step let a range
-#: bias slide under its floor (libRSF beacon 107, tests).
+#: second; a Gaussian step cost spreads that step over seconds. Measured
+#: (fourteenth session, batch, common-mode step at 2): five stall logs
+#: (tests/test_stalls.py) 4-12 cm at z 3.6-5.7 (Gaussian 13-43 cm at z
+#: 11-25); slip RMS 6-55 % lower on the paper and yard logs (seeds 4-5).
+#: On the joint step (thirteenth session, branch wip/slip-huber): at 1.345 a
+#: stall under a frozen receiver (tests/test_honesty.py) zig-zagged (rows
+#: 0.34 m off at z 9), and the differential step at a Huber loss let a range
+#: bias slide under its floor (libRSF beacon 107, tests), so it stays Gaussian.
 SLIP_STEP_K = 2.0
-#: sqrt of the curvature weight given for the covariance to a Huber slip step
-#: beyond its threshold (walk_rows' ``laplace``), where the loss is linear.
+#: Floor of robust_curvature (a sqrt weight): a Huber step beyond its
+#: threshold, where the loss is linear, keeps this much for the covariance.
 LAPLACE_FLOOR = 1e-3
+
+
+def robust_curvature(u: np.ndarray, kind: str, k: float) -> np.ndarray:
+    """sqrt of the loss's second derivative rho''(u) at a whitened residual
+    u, floored at LAPLACE_FLOOR: the rows' weight for a covariance (the
+    Laplace approximation at the optimum), where robust_weight's IRLS
+    secant k/|u| would claim the data knew more than the loss says. Huber:
+    1 inside k, 0 beyond; Cauchy: (1 - (u/k)^2) / (1 + (u/k)^2)^2, below 0
+    beyond k."""
+    u = np.abs(u)
+    if kind == "huber":
+        c = np.where(u <= k, 1.0, 0.0)
+    elif kind == "cauchy":
+        r = (u / k) ** 2
+        c = (1.0 - r) / (1.0 + r) ** 2
+    else:
+        raise ValueError(f"unknown robust loss {kind!r}")
+    return np.sqrt(np.maximum(c, LAPLACE_FLOOR**2))
 
 
 def robust_weight(u: np.ndarray, kind: str, k: float):
@@ -292,8 +311,8 @@ def walk_rows(prob: Problem, W: np.ndarray, k0: int, k1: int, laplace: bool = Fa
     there, 0 (LAPLACE_FLOOR), not the IRLS weight k/|u|. In its linear part
     the loss does not care when between two keyframes a stall's slip steps,
     and only the data say; the IRLS weight claimed to know. Measured on five
-    range-only stall logs: the largest z 4.7-6.8 -> 3.6-5.7; the paper and
-    yard logs' mean pose NEES within 0.03 of the IRLS weight's."""
+    stall logs (ranges, one with GPS too): the largest z 4.7-6.8 -> 3.6-5.7;
+    the paper and yard logs' mean pose NEES within 0.03 of the IRLS weight's."""
     w0, w1 = W[k0:k1], W[k0 + 1:k1 + 1]
     A_w = prob.rw.whiten(slice(k0, k1))
     b_w = -np.einsum("kij,kj->ki", A_w, w1 - w0)
@@ -335,8 +354,7 @@ def walk_rows(prob: Problem, W: np.ndarray, k0: int, k1: int, laplace: bool = Fa
         # Slip is not a slow random walk: a wheel grips or spins, and a stall
         # starts and ends within a second. Huber on the common-mode step costs
         # such a step linearly beyond k sigma, so it is taken where the data
-        # put it, and its IRLS weight k/|u| leaves the states there as
-        # uncertain as the data leave them (batch's covariance).
+        # put it; for the covariance (laplace) the loss's curvature there.
         R = prob.rw.slip_split
         A_w0, A_w1 = A_w0.copy(), A_w1.copy()
         A_w0[:, WSL, :] = np.einsum("ij,kjl->kil", R, A_w0[:, WSL, :])
@@ -346,7 +364,7 @@ def walk_rows(prob: Problem, W: np.ndarray, k0: int, k1: int, laplace: bool = Fa
         sw, rho = robust_weight(b_w[:, c], "huber", prob.slip_step_k)
         cost = float(np.sum(rho - 0.5 * (sw * b_w[:, c]) ** 2))
         if laplace:
-            sw = np.where(np.abs(b_w[:, c]) <= prob.slip_step_k, 1.0, LAPLACE_FLOOR)
+            sw = robust_curvature(b_w[:, c], "huber", prob.slip_step_k)
         A_w0[:, c, :] *= sw[:, None]
         A_w1[:, c, :] *= sw[:, None]
         b_w[:, c] *= sw
@@ -525,8 +543,8 @@ def linearize(prob: Problem, pose: np.ndarray, W: np.ndarray, k0: int = 0, k1: i
         # whiteners, so their rows are weighted one by one (IRLS).
         sw, rho = robust_weight(b_w[:, 0:2], prob.velocity_loss, VELOCITY_LOSS_K[prob.velocity_loss])
         robust_cost += float(np.sum(rho - 0.5 * (sw * b_w[:, 0:2]) ** 2))
-        if laplace:      # (walk_rows; Cauchy's curvature beyond k is below 0, floored alike)
-            sw = np.where(np.abs(b_w[:, 0:2]) <= VELOCITY_LOSS_K[prob.velocity_loss], 1.0, LAPLACE_FLOOR)
+        if laplace:      # (walk_rows)
+            sw = robust_curvature(b_w[:, 0:2], prob.velocity_loss, VELOCITY_LOSS_K[prob.velocity_loss])
         A_w0[:, 0:2, :] *= sw[:, :, None]
         A_w1[:, 0:2, :] *= sw[:, :, None]
         b_w[:, 0:2] *= sw

@@ -61,6 +61,10 @@ W_IDX = [0, 1, 2, 5, 6, 7]   # rows of the 8-vector W (graph.py) in W_KEY
 S_IDX = [3, 4]
 
 
+#: GraphOptions that only batch implements; the incremental runners refuse them set.
+BATCH_ONLY = ("range_bias", "velocity_loss", "slip_step_k")
+
+
 @dataclass(frozen=True)
 class IncrementalOptions(GraphOptions):
     """isam2's and fixed-lag's options: the graph's, and the incremental solvers'."""
@@ -420,6 +424,7 @@ class _Runner:
 
     def __init__(self, log: Log, schedule: Schedule, options: IncrementalOptions, prob: Problem | None = None):
         if options.range_bias or options.velocity_loss is not None or math.isfinite(options.slip_step_k):
+            # (BATCH_ONLY: runs.compare leaves them out of isam2's options)
             from odomgraph.errors import OdomgraphError
             raise OdomgraphError(f"{self.method}: range biases, a robust velocity random walk and Huber slip "
                                  "steps (slip_step_k) are batch-smoother options")

@@ -144,9 +144,10 @@ def coverage(sensor, t: np.ndarray, reach: float = 0.5) -> float:
 
 def yaw_rate_sensed(meas: Measurements) -> bool:
     """Whether a yaw-rate sensor (a gyro, or a velocity sensor's yaw rate)
-    covers at least half the log (``coverage``): then the slips' differential
-    is free to step (slip_intensity) and the heading does not hang on the
-    wheels' difference alone (batch's Huber slip steps, batch.build_problem)."""
+    covers at least half the log (``coverage``): then the heading does not
+    hang on the wheels' difference alone, and by default the slips'
+    differential is free to step (slip_intensity) and batch's common-mode
+    steps are Huber (batch.build_problem; whatever ProcessNoise.slip_differential says)."""
     return max(coverage(meas.gyro, meas.wheel.t), coverage(meas.velocity, meas.wheel.t)) >= 0.5
 
 
