@@ -59,7 +59,7 @@ from odomgraph.errors import EstimatorDivergedError, OdomgraphError, OptionError
 from odomgraph.estimators.ekf import EKF, event_values
 from odomgraph.estimators.initial import CONSENSUS_WINDOW
 from odomgraph.estimators.measurements import from_log
-from odomgraph.estimators.registry import REGISTRY, Method, check_option_names, parse_method
+from odomgraph.estimators.registry import REGISTRY, Method, check_option_names, options_for, parse_method
 from odomgraph.estimators.schedule import Schedule
 from odomgraph.estimators.sensors import DOF, SENSOR_NAMES, WHEEL, event_stream
 from odomgraph.estimators.slipcheck import in_stretches
@@ -203,8 +203,7 @@ class Online:
             raise OptionError("the EKF needs a schedule: --calibrate-until none (slip and scale together) is for "
                               "the smoothers; use a number of seconds (0 = slip only)")
         check_option_names(options)
-        cls = REGISTRY[method].options_type()
-        self.options = cls(**{k: v for k, v in options.items() if k in cls.__dataclass_fields__ and v is not None})
+        self.options = REGISTRY[method].options_type()(**options_for(method, options))
         self.robot, self.schedule, self.method = robot, schedule, method
         self.latency, self.chunk, self.context = float(latency), max(float(chunk), 1e-6), float(context)
         self._warmup_given = warmup is not None

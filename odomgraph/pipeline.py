@@ -46,9 +46,28 @@ def estimate(log: Log, method: Method = Method.ekf, schedule: Schedule = Schedul
     if not time_offset:
         # (with a clock offset, the run is an estimate() call of its own, checked there)
         est = _with_sideways(est, log, schedule, run, method)
+        est = _with_outrun(est, log)
     for e in (est, est.online):
         if e is not None:
             e.t_origin = log.t_origin
+    return est
+
+
+def _with_outrun(est: Estimate, log: Log) -> Estimate:
+    """``est`` flagged where its rows moved the robot further than its wheels
+    turned (analysis.plausible.outrun_stretches: fixes shifted along the
+    path, which every estimator follows with a slip no driven wheel makes).
+    Flagged only: whether the fixes inside the stretch or those around it
+    are off, or the robot skidded, the wheels cannot tell. After the
+    sideways check, which runs batch and isam2 again only when nothing
+    flagged them before. Only with a position or speed reference: without
+    one the ground speed is the wheels' own."""
+    from odomgraph.analysis.plausible import outrun_stretches, outrun_warning
+    found = outrun_stretches(est, log.robot.track_width) if _has_reference(log) else []
+    if found:
+        line = outrun_warning(found)
+        est.warnings.insert(0, line)
+        est.flags.append(line)
     return est
 
 
@@ -1061,8 +1080,8 @@ def _gyro_scale(log: Log, est: Estimate, schedule: Schedule, options: dict) -> d
         # the GPS clock the run estimated (a clock off moves the fixes along the path: every turn with it)
         fitted = fitted.with_(robot=fitted.robot.with_(gps_time_offset=est.time_offsets["gps"]["value"]))
     from dataclasses import fields
-    from odomgraph.estimators.batch import GraphOptions
-    opts = {k: v for k, v in options.items() if k in {f.name for f in fields(GraphOptions)}}
+    from odomgraph.estimators.batch import BatchGraphOptions
+    opts = {k: v for k, v in options.items() if k in {f.name for f in fields(BatchGraphOptions)}}
     gs, costs, scales = [], [], {}
 
     def profile(g):

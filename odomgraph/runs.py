@@ -37,13 +37,13 @@ def run_comparison(log: Log, schedule: Schedule, progress_for=None, **options) -
     """Run every estimator of ESTIMATORS (and the no-slip EKF) on ``log``.
 
     ``progress_for(label)`` may return a progress(done, total) callback for
-    each run. ``options`` are passed to every estimator (see pipeline.estimate),
-    except ``range_bias``, which only the batch smoother estimates.
+    each run. Each estimator takes those of ``options`` its options type has
+    (registry.foreign; see pipeline.estimate): range biases, say, only batch.
     """
     from odomgraph.io.log import rebased
     log = rebased(log)  # Log.t_origin
     from odomgraph.estimators.ekf import EKFOptions, run_ekf
-    from odomgraph.estimators.incremental import BATCH_ONLY
+    from odomgraph.estimators.registry import foreign
     if schedule.calibrate_until is None:
         raise OdomgraphError("compare runs the EKF, which needs a schedule: use --calibrate-until SECONDS "
                              "(0 = slip only), not 'none'")
@@ -60,7 +60,8 @@ def run_comparison(log: Log, schedule: Schedule, progress_for=None, **options) -
             return None
 
     for label, method in (("ekf", Method.ekf), ("isam2", Method.isam2), ("batch", Method.batch)):
-        opts = options if method is Method.batch else {k: v for k, v in options.items() if k not in BATCH_ONLY}
+        # each its own (an EKF gate for the EKF, batch's Huber slip steps for batch)
+        opts = {k: v for k, v in options.items() if k not in foreign(method)}
         est = attempt(label, lambda: estimate(log, method, schedule, prog(label), **opts))
         if est is None:
             if label == "isam2":

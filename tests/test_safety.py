@@ -511,6 +511,36 @@ def test_library_options_are_checked_too(short_log):
         estimate(read_log(short_log), "bach")
 
 
+@pytest.mark.parametrize("method, option, value, takers", [
+    ("ekf", "keyframe_hz", 2.0, "batch, isam2, fixed-lag"),
+    ("batch", "gate", 10.0, "ekf"),
+    ("isam2", "slip_step_k", 2.0, "batch"),
+    ("fixed-lag", "velocity_loss", "huber", "batch"),
+    ("batch", "lag", 3.0, "isam2, fixed-lag"),
+])
+def test_another_estimators_option_is_refused_not_dropped(short_log, method, option, value, takers):
+    """An option that only other estimators take does nothing here: set, it
+    is an error naming whose option it is (it was dropped in silence, so a
+    run looked as if it had used it). At its default, or None (the CLI hands
+    one set to every method), it is accepted."""
+    from odomgraph.errors import OptionError
+    from odomgraph.estimators.registry import REGISTRY, options_for
+    from odomgraph.pipeline import estimate
+    flag = "--" + option.replace("_", "-")
+    with pytest.raises(OptionError, match=rf"^{option} \({flag}\) is an option of {takers}, not of {method}$"):
+        estimate(read_log(short_log), method, **{option: value})
+    taker = REGISTRY[[m for m in REGISTRY if m.value == takers.split(", ")[0]][0]].options_type()
+    default = taker.__dataclass_fields__[option].default
+    assert options_for(method, {option: default, "pin": ()}) == {"pin": ()}
+    assert options_for(method, {option: None}) == {}
+
+
+def test_another_estimators_option_on_the_command_line(tmp_path, short_log):
+    one_line_error(run("estimate", short_log, "--method", "ekf", "--keyframe-hz", "2", "-o", tmp_path / "out"),
+                   "keyframe_hz (--keyframe-hz) is an option of batch, isam2, fixed-lag, not of ekf")
+    assert not (tmp_path / "out").exists()
+
+
 def test_usage_errors_are_one_line_too(tmp_path, short_log):
     one_line_error(run("estimate", short_log, "--method", "nope", "-o", tmp_path / "o"), "nope")
     one_line_error(run("estimate", short_log, "--no-such-option", "-o", tmp_path / "o"), "--no-such-option")

@@ -22,6 +22,18 @@ MIN_SPEED = 0.2
 MIN_DURATION = 3.0
 
 
+def wheel_motion(est, track_width: float) -> tuple[np.ndarray, np.ndarray]:
+    """((N, 2) the ground's speed under each wheel, (N, 2) each wheel's own
+    surface speed = ground speed + slip (LOG_FORMAT's error model; factors.
+    encoder, paper eq. 19-24)) of ``est``'s rows, (left, right) [m/s], for
+    the nominal track ``track_width`` [m] times the estimated track scale."""
+    x = est.mean
+    half = 0.5 * track_width * x[:, S.SCALE][:, 2]
+    v, w = x[:, S.V], x[:, S.OMEGA]
+    ground = np.stack([v - w * half, v + w * half], -1)
+    return ground, ground + x[:, S.SLIP]
+
+
 def reversed_motion_warnings(est, track_width: float) -> list[str]:
     """One line per stretch where ``est`` has the robot travelling one way
     while both wheels drive it the other (LOG_FORMAT's error model: the
@@ -31,10 +43,8 @@ def reversed_motion_warnings(est, track_width: float) -> list[str]:
     if len(t) < 2:
         return []
     x = est.mean
-    half = 0.5 * track_width * x[:, S.SCALE][:, 2]
-    v, w = x[:, S.V], x[:, S.OMEGA]
-    ground = np.stack([v - w * half, v + w * half], -1)          # speed of the ground under each wheel
-    surface = ground + x[:, S.SLIP]                               # the wheel's own surface speed
+    v = x[:, S.V]
+    ground, surface = wheel_motion(est, track_width)
     against = np.all((ground * surface < 0) & (np.abs(ground) > MIN_SPEED) & (np.abs(surface) > MIN_SPEED), 1)
     out = []
     edges = np.flatnonzero(np.diff(np.concatenate([[0], against.astype(np.int8), [0]])))
@@ -93,9 +103,7 @@ def skid_warnings(est, track_width: float) -> list[str]:
     if len(t) < 2:
         return []
     x, sig = est.mean, est.sigma
-    half = 0.5 * track_width * x[:, S.SCALE][:, 2]
-    v, w = x[:, S.V], x[:, S.OMEGA]
-    ground = np.stack([v - w * half, v + w * half], -1)
+    ground, _ = wheel_motion(est, track_width)
     slip = x[:, S.SLIP]
     against = -slip * np.sign(ground)                              # > 0: slower than the ground
     thr = np.maximum(SKID_MIN, SKID_REL * np.abs(ground))
@@ -137,6 +145,92 @@ def skid_warnings(est, track_width: float) -> list[str]:
                        "the scale factors are wrong; not trustworthy")
             break                                                  # one line per wheel
     return out
+
+
+# ------------------------------------------- a robot that outran its wheels
+#: A stretch where the ground passed under both wheels further than they
+#: turned is a finding beyond this distance [m]...
+OUTRUN_M = 0.08
+#: ...with its largest speed excess beyond this many of the rows' slip sigma.
+OUTRUN_Z = 4.0
+#: Rows further apart than this [s] end a stretch: across a gap the motion is not measured.
+OUTRUN_GAP = 2.0
+
+
+def outrun_excess(est, track_width: float) -> tuple[np.ndarray, np.ndarray]:
+    """((N,) how much faster the ground passed under *both* wheels than they
+    turned: the smaller of the two wheels' drags [m/s]; (N,) its sigma, the
+    larger slip sigma [m/s]) of ``est``'s rows (outrun_stretches).
+
+    A wheel drags when its surface turns slower than the ground under it
+    passes (slip against the ground's direction). One wheel may drag for a
+    while (a brake, a rut: the yard scenario's left wheel, -0.2 m/s for 8 s);
+    a driven wheel otherwise spins (the robot moves less than it turns) or
+    stalls. Both at once is a skid (wheels locked while the robot slides, or
+    pushed), or encoders that lost ticks, or fixes that pulled the rows
+    ahead. Each drag is at most the ground's own speed under that wheel: a
+    wheel spinning against a robot that barely moves counts by that motion,
+    so the sign of a standing robot's v does not matter (a yard log's stuck
+    robot, v -0.01 m/s with both wheels spinning 0.4 m/s forward, read 0.4
+    without it). Per wheel, not against the faster wheel: in a turn the
+    outer wheel turns faster than the centre moves, and a forward shift of
+    the fixes there (a helper's probe: batch 0.36 m off at z 30) never
+    outran it."""
+    ground, surface = wheel_motion(est, track_width)
+    along = np.where(ground >= 0.0, 1.0, -1.0)
+    drag = np.clip(along * (ground - surface), 0.0, np.abs(ground))
+    return np.min(drag, axis=1), np.max(est.sigma[:, S.SLIP], axis=1)
+
+
+def outrun_stretches(est, track_width: float) -> list[tuple[float, float, float, float]]:
+    """(start [s], end [s], distance beyond the wheels [m], peak in sigmas)
+    of each run of ``est``'s rows ((N,) t, (N, 11) mean and sigma) in which
+    the ground passed under both wheels faster than they turned (outrun_excess) by more than OUTRUN_M
+    in all, at more than OUTRUN_Z sigma at its peak; [] when none did.
+
+    Why: where the fixes shift along the direction of travel (a GNSS
+    multipath shift of 0.3-1 m held for seconds), every estimator follows
+    them with a slip against the travel, which no driven wheel makes: a
+    helper's probe (fourteenth session) had batch 0.5 m off at z 80, status
+    ok. The sideways check (analysis.sideways) cannot see it: the move is
+    along the path. Measured (fifteenth session; tests/test_outrun.py holds
+    other logs): clean paper and yard logs (seeds 1-8, GPS 1-10 Hz, ranges
+    alone, repeated stalls, a stuck robot whose wheels spin), every
+    estimator: at most 0.076 m (at z 1.0), at most z 3.0 (at 0.047 m); the
+    OptiOdom runs and the libRSF cut: at most 0.054 m at z 0.5 (the Jackal
+    bag has no reference and is not checked: 0.26 m at z 3.9 there); the
+    probe's fixes shifted 0.3-0.5 m along the path: 0.09-0.50 m at z
+    4.7-18.7. Not seen (a helper's probe): a shift while a wheel spins (the
+    estimate spins it less instead) and a shift backwards inside a turn,
+    taken for one wheel's slip.
+    """
+    t = np.asarray(est.t, float)
+    if len(t) < 2:
+        return []
+    e, s = outrun_excess(est, track_width)
+    dt = np.diff(t)
+    # an interval counts when both its rows outran the wheels and no gap lies between them
+    step = (e[:-1] > 0) & (e[1:] > 0) & (dt <= OUTRUN_GAP)
+    part = np.where(step, 0.5 * (e[:-1] + e[1:]) * dt, 0.0)
+    z = e / np.maximum(s, 1e-12)
+    edges = np.diff(np.concatenate([[0], step.astype(np.int8), [0]]))
+    out = []
+    for i, j in zip(np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)):
+        # intervals i..j-1: rows i..j
+        dist, peak = float(part[i:j].sum()), float(z[i:j + 1].max())
+        if dist > OUTRUN_M and peak > OUTRUN_Z:
+            out.append((float(t[i]), float(t[j]), dist, peak))
+    return out
+
+
+def outrun_warning(found: list[tuple[float, float, float, float]]) -> str:
+    """The line naming outrun_stretches' ``found`` (at most five)."""
+    spans = ", ".join(f"{a:.1f}-{b:.1f} s ({m:.2f} m, {z:.0f} sigma)" for a, b, m, z in found[:5])
+    more = f" and {len(found) - 5} more" if len(found) > 5 else ""
+    return (f"the estimate moved the robot further than its wheels turned at {spans}{more}: its rows there "
+            "follow the fixes or ranges (a GNSS multipath shift along the path), or the robot skidded (wheels "
+            "locked while it slid, or pushed), or the encoders lost ticks; rows there may be off by that much; "
+            "not trustworthy")
 
 
 #: A causal row (the EKF's, isam2's online.csv, fixed-lag's) that lands

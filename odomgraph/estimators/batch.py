@@ -41,8 +41,8 @@ from odomgraph.io.log import Log
 @dataclass(frozen=True)
 class GraphOptions:
     """The keyframe graph's options, which batch, isam2 and fixed-lag all
-    take (SmootherOptions adds the batch solver's, IncrementalOptions the
-    incremental smoothers')."""
+    take (BatchGraphOptions adds batch's own graph options and SmootherOptions
+    its solver's; IncrementalOptions the incremental smoothers')."""
     keyframe_hz: float = bounded(5.0, ge=0.01, le=1000)
     """Keyframe rate [Hz] (at most the encoder rate); slip is resolved at this rate."""
     robust: str | None = bounded("cauchy", choices=("huber", "cauchy", "none"), optional=True)
@@ -54,6 +54,25 @@ class GraphOptions:
     """Cauchy scale [m/s] of the sparse zero-slip prior outside the calibration
     window (the whole log with ``calibrate_until=None``). None: no prior there,
     slip is a free random walk after the window as in the EKF."""
+    pin: tuple[tuple[str, str], ...] = ()
+    """(scale combination, reason) pairs to hold at nominal with their prior
+    sigma, as if the log could not determine them (observability)."""
+    wheel_speed_units: bool = True
+    """With a calibration window, take the v and slip random walks in
+    wheel-speed units (graph.walk_rows): no prior then pays for shrinking the
+    speeds into larger scale factors. False: the plain walks (as the EKF)."""
+
+    def __post_init__(self):
+        check_fields(self)
+
+
+@dataclass(frozen=True)
+class BatchGraphOptions(GraphOptions):
+    """The graph as batch builds it: the keyframe graph's options and what
+    only batch implements (range-bias states, a robust velocity walk, Huber
+    slip steps). isam2 and fixed-lag do not take these (IncrementalOptions
+    derives from GraphOptions), so an estimator is never handed an option it
+    would ignore (the registry says whose option it is)."""
     range_bias: bool = False
     """Estimate a constant range bias per beacon (UWB antenna delays, NLOS offsets)."""
     range_bias_sigma: float = bounded(0.5, gt=0)
@@ -71,21 +90,11 @@ class GraphOptions:
     read as a spin in place (a yard log without a gyro, GPS at 5 Hz, a 0.8 m/s
     slip of one wheel: both slips +2 m/s, the heading 3 rad off, rows 0.75 m
     off at z 40, status ok; Gaussian steps: flagged)."""
-    pin: tuple[tuple[str, str], ...] = ()
-    """(scale combination, reason) pairs to hold at nominal with their prior
-    sigma, as if the log could not determine them (observability)."""
-    wheel_speed_units: bool = True
-    """With a calibration window, take the v and slip random walks in
-    wheel-speed units (graph.walk_rows): no prior then pays for shrinking the
-    speeds into larger scale factors. False: the plain walks (as the EKF)."""
-
-    def __post_init__(self):
-        check_fields(self)
 
 
 @dataclass(frozen=True)
-class SmootherOptions(GraphOptions):
-    """The batch smoother's options: the graph's, and its Gauss-Newton solver's."""
+class SmootherOptions(BatchGraphOptions):
+    """The batch smoother's options: its graph's, and its Gauss-Newton solver's."""
     max_iterations: int = bounded(50, ge=1, integer=True)
     rel_tol: float = bounded(1e-7, gt=0, lt=1)
     """Stop when the cost decreases by less than this fraction,"""
@@ -111,16 +120,19 @@ def build_problem(log: Log, schedule: Schedule, options: GraphOptions, causal: b
     cov = init.P.copy()
     zero = zero_slip_intervals(kf.t, init, meas.t_start, schedule)
     robust = options.slip_cauchy
-    if options.range_bias and not (kf.rng_k.size and log.robot.beacons):
+    # batch's own graph options; isam2's and fixed-lag's graph has none of them
+    own = options if isinstance(options, BatchGraphOptions) else BatchGraphOptions(slip_step_k=math.inf)
+    if own.range_bias and not (kf.rng_k.size and log.robot.beacons):
         from odomgraph.errors import OdomgraphError
         raise OdomgraphError("--range-bias: the log has no ranges to estimate a bias from")
     loss = None if options.robust in (None, "none") else options.robust
-    step_k = options.slip_step_k
+    sensed = yaw_rate_sensed(meas)
+    step_k = own.slip_step_k
     if step_k is None:
-        step_k = SLIP_STEP_K if yaw_rate_sensed(meas) else math.inf
-    return Problem(kf, log.robot, mean, cov, zero, robust, slip_intensity(log.robot.process, meas), loss,
-                   options.robust_k, options.range_bias_sigma if options.range_bias else None,
-                   options.velocity_loss, slip_step_k=step_k, init=init,
+        step_k = SLIP_STEP_K if sensed else math.inf
+    return Problem(kf, log.robot, mean, cov, zero, robust, slip_intensity(log.robot.process, meas, sensed), loss,
+                   options.robust_k, own.range_bias_sigma if own.range_bias else None,
+                   own.velocity_loss, slip_step_k=step_k, init=init,
                    spikes=dict(meas.spikes), meas=meas)
 
 

@@ -316,7 +316,7 @@ def walk_rows(prob: Problem, W: np.ndarray, k0: int, k1: int, laplace: bool = Fa
     w0, w1 = W[k0:k1], W[k0 + 1:k1 + 1]
     A_w = prob.rw.whiten(slice(k0, k1))
     b_w = -np.einsum("kij,kj->ki", A_w, w1 - w0)
-    A_w0, A_w1 = -A_w, A_w.copy()
+    A_w0, A_w1 = -A_w, A_w.copy()       # fresh arrays: the branches below write into them
     if prob.wheel_speed_units:
         # Steps of (mean ticks/m scale) v and scale x slip, relative to
         # speed_ref, instead of v and slip. A Gaussian walk on v itself is
@@ -330,7 +330,6 @@ def walk_rows(prob: Problem, W: np.ndarray, k0: int, k1: int, laplace: bool = Fa
         # omega measured worse (a track bias with a noisy gyro and good GPS).
         ref = np.asarray(prob.speed_ref, float)
         sc0, sc1 = w0[:, WSC] / ref, w1[:, WSC] / ref
-        A_w0, A_w1 = A_w0.copy(), A_w1.copy()
         f0, f1 = 0.5 * (sc0[:, 0] + sc0[:, 1]), 0.5 * (sc1[:, 0] + sc1[:, 1])
         a = A_w[:, 0, 0]                                          # v: a diagonal whitener row
         b_w[:, 0] = -a * (f1 * w1[:, 0] - f0 * w0[:, 0])
@@ -356,7 +355,6 @@ def walk_rows(prob: Problem, W: np.ndarray, k0: int, k1: int, laplace: bool = Fa
         # such a step linearly beyond k sigma, so it is taken where the data
         # put it; for the covariance (laplace) the loss's curvature there.
         R = prob.rw.slip_split
-        A_w0, A_w1 = A_w0.copy(), A_w1.copy()
         A_w0[:, WSL, :] = np.einsum("ij,kjl->kil", R, A_w0[:, WSL, :])
         A_w1[:, WSL, :] = np.einsum("ij,kjl->kil", R, A_w1[:, WSL, :])
         b_w[:, WSL] = b_w[:, WSL] @ R.T

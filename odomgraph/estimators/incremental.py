@@ -27,7 +27,6 @@ tight random walk (see graph.SCALE_FLOOR).
 """
 from __future__ import annotations
 
-import math
 import time
 from dataclasses import dataclass
 
@@ -61,22 +60,18 @@ W_IDX = [0, 1, 2, 5, 6, 7]   # rows of the 8-vector W (graph.py) in W_KEY
 S_IDX = [3, 4]
 
 
-#: GraphOptions that only batch implements; the incremental runners refuse them set.
-BATCH_ONLY = ("range_bias", "velocity_loss", "slip_step_k")
-
-
 @dataclass(frozen=True)
 class IncrementalOptions(GraphOptions):
-    """isam2's and fixed-lag's options: the graph's, and the incremental solvers'."""
+    """isam2's and fixed-lag's options: the keyframe graph's, and the
+    incremental solvers'. Not batch's own graph options (BatchGraphOptions:
+    range biases, a robust velocity walk, Huber slip steps); the registry
+    refuses them here by name. Huber slip steps were measured here (joint
+    step, thirteenth session): isam2's slips 20-50 % closer to the truth on
+    the paper and yard logs, but 3 of 16 range-only 6 s stalls ended 0.6-1.5 m
+    off (flagged; 0.24 m Gaussian): the smoothed v held at the wheels' speed
+    into the stall while ranges were gated at their first linearisation."""
     lag: float = bounded(5.0, gt=0)
     """Fixed-lag window [s] (fixed-lag only)."""
-    slip_step_k: float = bounded(math.inf, gt=0, infinite=True)
-    """Gaussian slip steps only (inf; GraphOptions.slip_step_k is batch's).
-    Measured with Huber steps (joint step, thirteenth session): isam2's slips
-    20-50 % closer to the truth on the paper and yard logs, but 3 of 16
-    range-only 6 s stalls ended 0.6-1.5 m off (flagged; 0.24 m Gaussian):
-    the smoothed v held at the wheels' speed into the stall while ranges were
-    gated at their first linearisation."""
     relinearize_threshold: float = bounded(0.05, gt=0)
     """ISAM2 relinearisation threshold of pose [m, rad] and velocity [m/s, rad/s]
     (built-in factors); bias, scale and slip thresholds are scaled from it."""
@@ -374,7 +369,7 @@ class _Graph:
         most, and a slip row touches four (both slips, both scale copies):
         its small derivative on scale copy k+1 is put on copy k, which a
         scale walk at graph.SCALE_FLOOR holds equal to it."""
-        A0, A1, bw, _ = walk_rows(self.prob, W, k, k + 1)      # Gaussian steps (slip_step_k inf)
+        A0, A1, bw, _ = walk_rows(self.prob, W, k, k + 1)      # Gaussian steps (Problem.slip_step_k inf)
         A0, A1, bw = A0[0], A1[0], bw[0]
         lp = gtsam.Values(lp)
         lp.insert(W_KEY(k + 1), W[k + 1, W_IDX].copy())
@@ -423,11 +418,6 @@ class _Runner:
     per_keyframe = ("pose", "W", "update_times")
 
     def __init__(self, log: Log, schedule: Schedule, options: IncrementalOptions, prob: Problem | None = None):
-        if options.range_bias or options.velocity_loss is not None or math.isfinite(options.slip_step_k):
-            # (BATCH_ONLY: runs.compare leaves them out of isam2's options)
-            from odomgraph.errors import OdomgraphError
-            raise OdomgraphError(f"{self.method}: range biases, a robust velocity random walk and Huber slip "
-                                 "steps (slip_step_k) are batch-smoother options")
         self.log, self.schedule, self.options = log, schedule, options
         self.heading_watch = None    # set by a stream (online.py): its HeadingWatch (when the motion showed the heading)
         # _watch: per sensor [slow running mean, count, dof, the last few values]

@@ -151,17 +151,18 @@ def yaw_rate_sensed(meas: Measurements) -> bool:
     return max(coverage(meas.gyro, meas.wheel.t), coverage(meas.velocity, meas.wheel.t)) >= 0.5
 
 
-def slip_intensity(process, meas: Measurements) -> np.ndarray:
+def slip_intensity(process, meas: Measurements, sensed: bool | None = None) -> np.ndarray:
     """(2, 2) slip random-walk intensity in (left, right) [(m/s)^2/s], for the EKF and the smoothers.
 
     Built in common-mode c = (sL+sR)/2 and differential d = sR-sL coordinates,
     mapped by (sL, sR) = (c - d/2, c + d/2). The differential default depends
     on the log: see ProcessNoise.slip_differential; a yaw-rate sensor counts
-    only where it covers at least half the log (``coverage``).
+    only where it covers at least half the log (``coverage``); ``sensed``
+    is that answer when the caller already has it (``yaw_rate_sensed``).
     """
     q_d = process.slip_differential
     if q_d is None:
-        q_d = 1.0 if yaw_rate_sensed(meas) else 0.02
+        q_d = 1.0 if (yaw_rate_sensed(meas) if sensed is None else sensed) else 0.02
     return process.slip**2 * np.ones((2, 2)) + 0.25 * q_d**2 * np.array([[1.0, -1.0], [-1.0, 1.0]])
 
 

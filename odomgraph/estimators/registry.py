@@ -86,6 +86,35 @@ def check_option_names(options: dict) -> None:
             raise OptionError(f"{k} ({option_name(k)}) {problem}, got {value_text(v)}")
 
 
+def foreign(method) -> set[str]:
+    """The option names that other estimators' options types take and
+    ``method``'s does not (the comparison leaves these out of its options)."""
+    method = parse_method(method)
+    own = REGISTRY[method].options_type().__dataclass_fields__
+    return {k for t in option_types() for k in t.__dataclass_fields__} - set(own)
+
+
+def options_for(method, options: dict) -> dict:
+    """The ``options`` that ``method``'s options type takes (None values: the
+    default, left out). An option only other estimators take, set to anything
+    but its default there, is an OptionError naming whose it is
+    (``slip_step_k`` for isam2 was dropped in silence: an option that does
+    nothing must not look as if it did)."""
+    from odomgraph.checks import option_name
+    from odomgraph.errors import OptionError
+    method = parse_method(method)
+    other = foreign(method)
+    for k, v in options.items():
+        if v is None or k not in other:
+            continue
+        takers = [m for m, e in REGISTRY.items() if k in e.options_type().__dataclass_fields__]
+        if v != REGISTRY[takers[0]].options_type().__dataclass_fields__[k].default:
+            raise OptionError(f"{k} ({option_name(k)}) is an option of {', '.join(m.value for m in takers)}, "
+                              f"not of {method.value}")
+    own = REGISTRY[method].options_type().__dataclass_fields__
+    return {k: v for k, v in options.items() if k in own and v is not None}
+
+
 def run(log, method, schedule, progress, options: dict):
     """Run ``method`` over ``log`` with the ``options`` its options type takes
     (the CLI passes one set for every method; None values mean the default)."""
@@ -97,6 +126,5 @@ def run(log, method, schedule, progress, options: dict):
         raise OdomgraphError("the EKF needs a schedule: --calibrate-until none (slip and scale together) "
                              "is for the smoothers; use a number of seconds (0 = slip only)")
     entry = REGISTRY[method]
-    cls = entry.options_type()
-    opts = cls(**{k: v for k, v in options.items() if k in cls.__dataclass_fields__ and v is not None})
+    opts = entry.options_type()(**options_for(method, options))
     return entry.run_function()(log, schedule, opts, progress)
