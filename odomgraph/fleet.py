@@ -152,10 +152,12 @@ def run_job(job: Job) -> tuple[dict, dict[str, bytes]]:
 def _check_options(kind: str, method, options: dict) -> None:
     """The options every log shares, checked once before any log is read
     (a bad one would otherwise fail every log the same way)."""
-    from odomgraph.estimators.registry import check_option_names, parse_method
+    from odomgraph.estimators.registry import check_option_names, options_for, parse_method
     parse_method(method)
     own = {"rate", "at", "time_offset", "fit_noise"} | ({"tune", "force"} if kind == "calibrate" else set())
     check_option_names({k: v for k, v in options.items() if k not in own})
+    # another estimator's option set here would fail every log alike
+    options_for(method, {k: v for k, v in options.items() if k not in own})
     rate = options.get("rate")
     if rate is not None and not rate > 0:
         raise OdomgraphError(f"--rate must be a positive number of Hz, got {rate!r}")

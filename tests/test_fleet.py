@@ -128,6 +128,11 @@ def test_a_fleet_where_every_log_fails_writes_nothing(tmp_path, robots):
     assert list((tmp_path / "out").iterdir()) == []
     res = run("estimate", robots, "--rate", "-3", "-o", tmp_path / "out")     # checked once, before any log
     assert res.exit_code != 0 and not list((tmp_path / "out").iterdir())
+    # another estimator's option: one line before any log is read (a second read found it failed every log)
+    res = run("estimate", robots, "--method", "ekf", "--keyframe-hz", "2", "-o", tmp_path / "out")
+    assert res.exit_code == 1 and not list((tmp_path / "out").iterdir()), res.output
+    assert res.stderr.strip() == ("odomgraph: error: keyframe_hz (--keyframe-hz) is an option of batch, isam2, "
+                                  "fixed-lag, not of ekf"), res.stderr
     res = run("calibrate", robots / "r1", robots / "r2", "-o", tmp_path / "cal.toml")
     assert res.exit_code == 1 and "a fleet writes a directory" in res.stderr
 

@@ -6,7 +6,7 @@ put for the whole log. Widening the range sigma for persistence
 scatter, but a mean of N biased ranges keeps the whole bias: simulated
 beacons reading 0.2-0.3 m off (sigma 0.05 m) held under half of the
 positions inside 3 sigma after a 13x widening (tests/test_noise_model.py).
-Bias states (GraphOptions.range_bias, batch) find them within 1 cm.
+Bias states (BatchGraphOptions.range_bias, batch) find them within 1 cm.
 
 Here each beacon's post-fit residuals are tested for a non-zero mean: the
 mean of those within OUTLIER robust sigmas, against its own sigma with the

@@ -205,7 +205,7 @@ ROBUST_K = {"huber": 1.345, "cauchy": 5.0}
 #: Thresholds of the robust velocity random walk (95 % efficiency).
 VELOCITY_LOSS_K = {"huber": 1.345, "cauchy": 2.385}
 #: Default Huber threshold [sigma] of the slips' common-mode random-walk step
-#: (GraphOptions.slip_step_k, walk_rows). A stall (the robot held while its
+#: (BatchGraphOptions.slip_step_k, walk_rows). A stall (the robot held while its
 #: wheels spin) steps the common-mode slip by the wheels' speed within a
 #: second; a Gaussian step cost spreads that step over seconds. Measured
 #: (fourteenth session, batch, common-mode step at 2): five stall logs

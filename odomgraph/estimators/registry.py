@@ -117,7 +117,9 @@ def options_for(method, options: dict) -> dict:
 
 def run(log, method, schedule, progress, options: dict):
     """Run ``method`` over ``log`` with the ``options`` its options type takes
-    (the CLI passes one set for every method; None values mean the default)."""
+    (options_for: the CLI passes one set for every method, None values mean
+    the default; another estimator's option set to anything but its default
+    is an OptionError)."""
     from odomgraph.errors import OdomgraphError
     method = parse_method(method)
     if options.get("range_bias") and method is not Method.batch:
