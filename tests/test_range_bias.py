@@ -89,7 +89,7 @@ def test_librsf_range_bias_states_come_out_positive():
 
 def test_range_bias_is_refused_where_it_is_not_estimated(tmp_path):
     log = _biased_log(duration=25.0)
-    with pytest.raises(OdomgraphError, match="batch smoother only"):
+    with pytest.raises(OdomgraphError, match=r"^range_bias \(--range-bias\) is an option of batch, not of isam2$"):
         estimate(log, Method.isam2, Schedule(20.0), range_bias=True)
     from odomgraph.io.log import write_log
     write_log(log.with_(ranges=None), tmp_path / "log")

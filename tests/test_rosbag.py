@@ -530,8 +530,12 @@ def test_tick_counter_problems_are_named(tmp_path):
     # a ROS 1 bag without its .bag suffix is still read (rosbags goes by the name)
     plain = tmp_path / "three"
     plain.write_bytes(p.read_bytes())
+    import tempfile
+    before = set(Path(tempfile.gettempdir()).glob("odomgraph-bag-*"))
     log = import_rosbag(plain, track_width=0.5, ticks_per_meter=1000, tick_topics=("/left_ticks", "/right_ticks"))
     assert len(log.encoders.t) == 20
+    # the *.bag link it was read through is gone with its directory (16 were left in /tmp by a day of tests)
+    assert set(Path(tempfile.gettempdir()).glob("odomgraph-bag-*")) == before
     junk = tmp_path / "junk"
     junk.write_text("not a bag\n")
     with pytest.raises(LogFormatError, match="not a ROS 1 bag"):

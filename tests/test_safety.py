@@ -535,6 +535,30 @@ def test_another_estimators_option_is_refused_not_dropped(short_log, method, opt
     assert options_for(method, {option: None}) == {}
 
 
+def test_a_default_is_recognised_whatever_its_kind():
+    """options_for lets another estimator's option through at its default:
+    a default_factory's value and an array compare by value (``!=`` against
+    a factory field's MISSING refused every value; against an array it
+    raised), and a field without a default has no value that passes."""
+    from dataclasses import dataclass, field, fields
+    from odomgraph.estimators.registry import _is_default
+
+    @dataclass
+    class Opts:
+        required: float
+        pin: tuple = ()
+        arm: np.ndarray = field(default_factory=lambda: np.zeros(2))
+        names: list = field(default_factory=list)
+        k: float | None = None
+    f = {x.name: x for x in fields(Opts)}
+    assert _is_default((), f["pin"]) and not _is_default(("x",), f["pin"])
+    assert _is_default(np.zeros(2), f["arm"]) and not _is_default(np.array([0.0, 0.1]), f["arm"])
+    assert not _is_default(np.zeros(3), f["arm"]) and not _is_default([0.0, 0.1], f["arm"])
+    assert _is_default([], f["names"]) and not _is_default(["a"], f["names"])
+    assert not _is_default(0.0, f["required"])
+    assert _is_default(None, f["k"]) and not _is_default(2.0, f["k"])
+
+
 def test_another_estimators_option_on_the_command_line(tmp_path, short_log):
     one_line_error(run("estimate", short_log, "--method", "ekf", "--keyframe-hz", "2", "-o", tmp_path / "out"),
                    "keyframe_hz (--keyframe-hz) is an option of batch, isam2, fixed-lag, not of ekf")

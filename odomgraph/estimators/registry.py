@@ -13,6 +13,8 @@ import importlib
 from dataclasses import dataclass
 from enum import Enum
 
+import numpy as np
+
 
 class Method(str, Enum):
     ekf = "ekf"
@@ -94,6 +96,22 @@ def foreign(method) -> set[str]:
     return {k for t in option_types() for k in t.__dataclass_fields__} - set(own)
 
 
+def _is_default(value, field) -> bool:
+    """Whether ``value`` equals the dataclass ``field``'s default (or what its
+    default_factory makes; a field without either has no default to equal).
+    Arrays compare by value, not by ``==``'s element-wise truth."""
+    from dataclasses import MISSING
+    if field.default is not MISSING:
+        default = field.default
+    elif field.default_factory is not MISSING:
+        default = field.default_factory()
+    else:
+        return False
+    if isinstance(value, np.ndarray) or isinstance(default, np.ndarray):
+        return np.shape(value) == np.shape(default) and bool(np.array_equal(value, default))
+    return bool(value == default)
+
+
 def options_for(method, options: dict) -> dict:
     """The ``options`` that ``method``'s options type takes (None values: the
     default, left out). An option only other estimators take, set to anything
@@ -108,7 +126,7 @@ def options_for(method, options: dict) -> dict:
         if v is None or k not in other:
             continue
         takers = [m for m, e in REGISTRY.items() if k in e.options_type().__dataclass_fields__]
-        if v != REGISTRY[takers[0]].options_type().__dataclass_fields__[k].default:
+        if not _is_default(v, REGISTRY[takers[0]].options_type().__dataclass_fields__[k]):
             raise OptionError(f"{k} ({option_name(k)}) is an option of {', '.join(m.value for m in takers)}, "
                               f"not of {method.value}")
     own = REGISTRY[method].options_type().__dataclass_fields__
@@ -122,8 +140,6 @@ def run(log, method, schedule, progress, options: dict):
     is an OptionError)."""
     from odomgraph.errors import OdomgraphError
     method = parse_method(method)
-    if options.get("range_bias") and method is not Method.batch:
-        raise OdomgraphError(f"--range-bias is estimated by the batch smoother only, not by {method.value}")
     if method is Method.ekf and schedule.calibrate_until is None:
         raise OdomgraphError("the EKF needs a schedule: --calibrate-until none (slip and scale together) "
                              "is for the smoothers; use a number of seconds (0 = slip only)")

@@ -31,6 +31,9 @@ digit, and the files written carry the absolute stamps.
 """
 from __future__ import annotations
 
+import shutil
+import tempfile
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -68,7 +71,11 @@ class Topic:
     """"wheels", "imu" or "gps" when the importer would pick it, else None."""
 
 
+@contextmanager
 def _reader(bag: Path):
+    """An open rosbags reader of ``bag`` (a ROS 1 file or a ROS 2 directory).
+    A ROS 1 file not named *.bag is read through a *.bag link in a temporary
+    directory, removed when the reader closes."""
     try:
         from rosbags.highlevel import AnyReader
         from rosbags.typesys import Stores, get_typestore
@@ -76,19 +83,24 @@ def _reader(bag: Path):
         raise LogFormatError(bag, "reading bags needs the 'rosbags' package: pip install 'odomgraph[rosbag]'") from None
     if not bag.exists():
         raise LogFormatError(bag, "bag does not exist")
+    tmp = None
     if bag.is_file() and bag.suffix != ".bag":
         with open(bag, "rb") as f:
             head = f.read(13)
-        if head == b"#ROSBAG V2.0\n":
-            # rosbags tells ROS 1 from ROS 2 by the name: read it through a *.bag link
-            import tempfile
-            link = Path(tempfile.mkdtemp(prefix="odomgraph-bag-")) / (bag.name + ".bag")
-            link.symlink_to(bag.resolve())
-            bag = link
-        else:
+        if head != b"#ROSBAG V2.0\n":
             raise LogFormatError(bag, "is a file but not a ROS 1 bag (no '#ROSBAG V2.0' header); a ROS 2 bag is a "
                                       "directory with metadata.yaml")
-    return AnyReader([bag], default_typestore=get_typestore(Stores.ROS2_HUMBLE))
+        # rosbags tells ROS 1 from ROS 2 by the name: read it through a *.bag link
+        tmp = Path(tempfile.mkdtemp(prefix="odomgraph-bag-"))
+        link = tmp / (bag.name + ".bag")
+        link.symlink_to(bag.resolve())
+        bag = link
+    try:
+        with AnyReader([bag], default_typestore=get_typestore(Stores.ROS2_HUMBLE)) as reader:
+            yield reader
+    finally:
+        if tmp is not None:
+            shutil.rmtree(tmp, ignore_errors=True)
 
 
 def _stamp_ns(msg) -> int:
