@@ -74,18 +74,6 @@ def test_the_distance_beyond_the_wheels_and_what_is_not():
     assert only[2] == pytest.approx(0.81, abs=1e-9)
 
 
-def _shifted(log, a, b, amp, ramp_s):
-    """``log`` with its fixes moved ``amp`` m along the true heading between
-    a and b [s]: at once (ramp_s 0) or over ramps of ramp_s [s]."""
-    g = log.gps
-    if ramp_s > 0:
-        ramp = np.clip(np.minimum(g.t - a, b - g.t) / ramp_s, 0.0, 1.0)
-    else:
-        ramp = ((g.t >= a) & (g.t <= b)).astype(float)
-    th = log.truth.at("theta", g.t)
-    return log.with_(gps=replace(g, x=g.x + amp * ramp * np.cos(th), y=g.y + amp * ramp * np.sin(th)))
-
-
 # (scenario, seed, GPS Hz, shift [m], span [s], ramp [s], the methods flagged; the others must be right)
 CASES = {
     "paper-10Hz-0.6m": ("paper", 51, 10.0, 0.6, (50.0, 56.0), 0.0, {"ekf", "batch", "isam2", "fixed-lag"}),
@@ -103,8 +91,9 @@ def _case(name):
     scenario, seed, hz, amp, span, ramp, flagged = CASES[name]
     base = paper(100.0) if scenario.startswith("paper") else yard(150.0)
     base = base.with_(slips=()) if scenario.endswith("noslip") else base
-    clean = inject(base.with_(rates=replace(base.rates, gps=hz)), Faults(), seed)
-    return clean, _shifted(clean, *span, amp, ramp), span, flagged, 20.0 if scenario.startswith("paper") else 30.0
+    base = base.with_(rates=replace(base.rates, gps=hz))
+    clean, shifted = (inject(base, Faults(gps_shifts=shifts), seed) for shifts in ((), ((*span, amp, ramp),)))
+    return clean, shifted, span, flagged, 20.0 if scenario.startswith("paper") else 30.0
 
 
 @pytest.mark.parametrize("name", list(CASES))
@@ -154,6 +143,6 @@ def test_a_backward_shift_in_a_turn_is_not_seen():
     from odomgraph.sim.faults import Faults, inject
     from odomgraph.sim.scenarios import paper
     base = paper(100.0)
-    clean = inject(base.with_(rates=replace(base.rates, gps=2.0)), Faults(), 53)
-    est = estimate(_shifted(clean, 60.0, 66.0, -0.5, 0.0), "batch", Schedule(20.0))
+    log = inject(base.with_(rates=replace(base.rates, gps=2.0)), Faults(gps_shifts=((60.0, 66.0, -0.5, 0.0),)), 53)
+    est = estimate(log, "batch", Schedule(20.0))
     assert [f for f in est.flags if "further than" in f]

@@ -207,3 +207,28 @@ def test_an_ekf_that_stops_on_a_late_gps_names_the_clock(name, seed, late):
     # batch runs through the same log and says the same of it
     est = estimate(log, "batch")
     assert status_of(est)[0] == "degraded" and any("GPS time stamps look" in f for f in est.flags), est.flags
+
+
+def test_the_trial_offsets_misfits_at_once_equal_one_at_a_time():
+    """timing._trial_misfits (every trial offset of a window at once, fixes
+    off the path at weight 0) equals rigid_misfit per trial on the fixes on
+    the path, per fix, to 1e-12 relative: windows at the log's start (fixes
+    shifted off the path), GPS at 1-20 Hz, clocks 1.2 s early to 1.7 s late."""
+    from odomgraph.analysis import timing as T
+    n = 0
+    for sc, seed, hz, off in (("paper", 31, 10.0, 0.0), ("yard", 32, 5.0, 0.4), ("paper", 33, 1.0, -1.2),
+                              ("yard", 34, 20.0, 1.7)):
+        base = paper(60.0) if sc == "paper" else yard(80.0)
+        log = inject(base.with_(rates=replace(base.rates, gps=hz)),
+                     Faults(clock_jumps=(("gps", 0.0, off),) if off else ()), seed)
+        log, P, W = T._prepare(log)
+        path = T._Path(log, (1.0, 1.0, 1.0))
+        for _, sel in T._windows(log, path):
+            tf, p, w = log.gps.t[sel], P[sel], W[sel]
+            one = []
+            for dl in T.TRIALS:
+                ok = T._inside(path, tf, dl)
+                one.append(T.rigid_misfit(path.antenna(tf[ok] - dl), p[ok], w[ok]) * len(tf) / max(1, ok.sum()))
+            np.testing.assert_allclose(T._trial_misfits(path, tf, p, w), one, rtol=1e-12, atol=0)
+            n += 1
+    assert n >= 15

@@ -204,6 +204,14 @@ def outrun_stretches(est, track_width: float) -> list[tuple[float, float, float,
     estimate spins it less instead) and a shift backwards inside a turn,
     taken for one wheel's slip.
     """
+    return [r for r in outrun_runs(est, track_width) if r[2] > OUTRUN_M and r[3] > OUTRUN_Z]
+
+
+def outrun_runs(est, track_width: float) -> list[tuple[float, float, float, float]]:
+    """(start [s], end [s], distance beyond the wheels [m], peak in sigmas)
+    of every run of ``est``'s rows in which the ground passed under both
+    wheels faster than they turned, however small (outrun_stretches keeps
+    the findings; benchmarks/outrun.py measures the margins)."""
     t = np.asarray(est.t, float)
     if len(t) < 2:
         return []
@@ -214,13 +222,9 @@ def outrun_stretches(est, track_width: float) -> list[tuple[float, float, float,
     part = np.where(step, 0.5 * (e[:-1] + e[1:]) * dt, 0.0)
     z = e / np.maximum(s, 1e-12)
     edges = np.diff(np.concatenate([[0], step.astype(np.int8), [0]]))
-    out = []
-    for i, j in zip(np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)):
-        # intervals i..j-1: rows i..j
-        dist, peak = float(part[i:j].sum()), float(z[i:j + 1].max())
-        if dist > OUTRUN_M and peak > OUTRUN_Z:
-            out.append((float(t[i]), float(t[j]), dist, peak))
-    return out
+    # intervals i..j-1: rows i..j
+    return [(float(t[i]), float(t[j]), float(part[i:j].sum()), float(z[i:j + 1].max()))
+            for i, j in zip(np.flatnonzero(edges == 1), np.flatnonzero(edges == -1))]
 
 
 def outrun_warning(found: list[tuple[float, float, float, float]]) -> str:

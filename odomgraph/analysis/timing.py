@@ -127,6 +127,32 @@ def _window_system(path: _Path, tf, p, w, delta: float, dl=(0.0, 0.0)):
     return A, rr, float(rr @ rr), max(1, 2 * n - 4)
 
 
+def _trial_misfits(path: _Path, tf, p, w) -> np.ndarray:
+    """(len(TRIALS),) each trial offset's rigid misfit of one window's fixes
+    ((n,) stamps tf, (n, 2) positions p, (n,) weights w) against the
+    antenna path, per fix on the path (rigid_misfit of the fixes whose
+    shifted time falls on it, times n / their count). All trials at once:
+    a fix off the path takes weight 0, which drops it from the fit exactly
+    (one trial at a time, the hour-long log's check took 1.9 s of its 2.7)."""
+    ts = tf[None, :] - TRIALS[:, None]                              # (T, n)
+    ok = (ts >= path.t[0]) & (ts <= path.t[-1])
+    d = path.antenna(ts.ravel()).reshape(*ts.shape, 2)               # (T, n, 2)
+    wk = w[None, :] * ok
+    total = wk.sum(1)
+    wn = wk / np.where(total > 0, total, 1.0)[:, None]
+    md = np.einsum("tn,tnk->tk", wn, d)
+    mp = wn @ p
+    a, b = d - md[:, None, :], p[None] - mp[:, None, :]
+    phi = np.arctan2(np.sum(wn * (a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]), 1),
+                     np.sum(wn * (a[..., 0] * b[..., 0] + a[..., 1] * b[..., 1]), 1))
+    cs, sn = np.cos(phi)[:, None], np.sin(phi)[:, None]
+    # p ~ R d + c with c = mp - R md, so the residual is b - R a
+    rx = b[..., 0] - (cs * a[..., 0] - sn * a[..., 1])
+    ry = b[..., 1] - (sn * a[..., 0] + cs * a[..., 1])
+    misfit = np.sum(wk * (rx**2 + ry**2), 1)
+    return misfit * len(tf) / np.maximum(1, ok.sum(1))
+
+
 def _windows(log, path: _Path, skip=()):
     """[(t0, fix selection)] of the WINDOW-second windows with enough fixes,
     outside the ``skip`` spans."""
@@ -188,11 +214,8 @@ def window_offsets(log, scales=(1.0, 1.0, 1.0), skip=(), max_misfit: float | Non
     for a, sel in _windows(log, path, skip):
         tf, p, w = g.t[sel], P[sel], W[sel]
 
-        def cost(dl):
-            ok = _inside(path, tf, dl)
-            return rigid_misfit(path.antenna(tf[ok] - dl), p[ok], w[ok]) * len(tf) / max(1, ok.sum())
         # coarse over TRIALS (per fix: the fixes on the path change with the shift)
-        coarse = np.array([cost(dl) for dl in TRIALS])
+        coarse = _trial_misfits(path, tf, p, w)
         i = int(np.argmin(coarse))
         if i == 0 or i == len(TRIALS) - 1:
             continue                                   # outside the range tried: cannot tell

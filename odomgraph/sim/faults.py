@@ -69,6 +69,12 @@ class Faults:
     spikes: tuple[tuple[str, float, float], ...] = ()
     """(sensor, time, size): one sample at ``time`` is off by ``size``: a wheel
     speed [m/s] ("encoders": the left wheel's ticks) or a yaw rate [rad/s] ("gyro")."""
+    gps_shifts: tuple[tuple[float, float, float, float], ...] = ()
+    """(start, end, shift, ramp): the fixes between start and end [s] move
+    ``shift`` [m] along the robot's true heading (negative: backwards), at
+    once (ramp 0) or over ramps of ``ramp`` [s] at both ends: a GNSS
+    multipath shift along the path, which analysis.plausible.outrun_stretches
+    looks for."""
 
     def __post_init__(self):
         for name in ("outlier_rate", "encoder_drop_rate", "encoder_dup_rate"):
@@ -83,6 +89,9 @@ class Faults:
         for st in self.stalls:
             if st.end <= st.start:
                 raise OptionError(f"a stall needs start < end, got {st.start:g} to {st.end:g} s")
+        for a, b, _, ramp in self.gps_shifts:
+            if b <= a or ramp < 0:
+                raise OptionError(f"a GPS shift needs start < end and ramp >= 0, got {a:g} to {b:g} s, ramp {ramp:g}")
 
     # ------------------------------------------------------------- motion
     def apply_to_scenario(self, sc: Scenario) -> Scenario:
@@ -118,6 +127,7 @@ class Faults:
             key = "encoders" if name == "wheel_speeds" else name
             obj = self._outliers(obj, key, t0, rng)
             obj = self._spikes(obj, key, t0, log)
+            obj = self._shifts(obj, t0, log)
             if name == "encoders":
                 obj = self._encoder_rows(obj, t0, rng)
             obj = self._gaps(obj, key, t0)
@@ -156,6 +166,19 @@ class Faults:
                 w[k] += size
                 obj = replace(obj, omega=w)
         return obj
+
+    def _shifts(self, obj, t0, log):
+        if not self.gps_shifts or not isinstance(obj, Gps) or log.truth is None:
+            return obj
+        amount = np.zeros(len(obj.t))
+        for a, b, shift, ramp in self.gps_shifts:
+            ta, tb = t0 + a, t0 + b
+            if ramp > 0:
+                amount += shift * np.clip(np.minimum(obj.t - ta, tb - obj.t) / ramp, 0.0, 1.0)
+            else:
+                amount += shift * ((obj.t >= ta) & (obj.t <= tb))
+        th = log.truth.at("theta", obj.t)
+        return replace(obj, x=obj.x + amount * np.cos(th), y=obj.y + amount * np.sin(th))
 
     def _encoder_rows(self, e: Encoders, t0, rng):
         n = len(e.t)
