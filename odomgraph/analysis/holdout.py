@@ -62,12 +62,23 @@ class HeldOut:
 
 
 def split_time(log) -> float | None:
-    """The time [s] the training part ends at: TRAIN_SHARE of the span that
-    holds the absolute sensor (or the gyro, without one); None: too little."""
-    ref = next((s for s in (log.gps, log.gyro) if s is not None and len(s.t) >= 2 * MIN_FIXES), None)
-    if ref is None:
+    """The time [s] the training part ends at: TRAIN_SHARE of the span in
+    which the absolute sensor (or the gyro, without one) overlaps the wheels;
+    None: too little. The overlap, not the sensor's own span: a bag whose GPS
+    and IMU ran 150 s before the wheel driver started put the split before
+    the first wheel row (a hostile probe: an IndexError in calibrate)."""
+    wheels = log.encoders if log.encoders is not None else log.wheel_speeds
+    if wheels is None or len(wheels.t) < 2:
         return None
-    return float(ref.t[0] + TRAIN_SHARE * (ref.t[-1] - ref.t[0]))
+    for s in (log.gps, log.gyro):
+        if s is None:
+            continue
+        a, b = max(s.t[0], wheels.t[0]), min(s.t[-1], wheels.t[-1])
+        inside = (s.t >= a) & (s.t <= b)
+        if inside.sum() >= 2 * MIN_FIXES:
+            t = s.t[inside]
+            return float(t[0] + TRAIN_SHARE * (t[-1] - t[0]))
+    return None
 
 
 def score_fixes(log, scales, t0: float, t1: float, window: float = WINDOW, skip=()) -> tuple[float, int] | None:

@@ -298,8 +298,11 @@ def import_rosbag(bag: Path | str, wheel_topic: str | None = None, left_joint: s
     ``ticks_per_meter`` (one value or (left, right)) and, having no header,
     are stamped with the bag's receive times."""
     bag = Path(bag)
-    if track_width is None or track_width <= 0:
-        raise LogFormatError(bag, "import rosbag needs a positive --track-width (the nominal robot) [m]")
+    if track_width is None or not (np.isfinite(track_width) and track_width > 0):
+        raise LogFormatError(bag, f"import rosbag needs a positive, finite --track-width (the nominal robot) [m], "
+                                  f"got {track_width}")
+    if wheel_radius is not None and not (np.isfinite(wheel_radius) and wheel_radius > 0):
+        raise LogFormatError(bag, f"--wheel-radius must be a positive, finite number [m], got {wheel_radius}")
     if stamps not in ("header", "receive"):
         raise LogFormatError(bag, f"--stamps must be header or receive, got {stamps!r}")
     if imu_axis not in ("auto", *AXES, *(f"-{a}" for a in AXES)):
@@ -307,7 +310,7 @@ def import_rosbag(bag: Path | str, wheel_topic: str | None = None, left_joint: s
     notes, warnings = [f"imported from bag {bag.name}"], []
     wheels, fixes, rates = [], [], []
     kind = None
-    fix_frame, imu_frame, no_fix = None, None, 0
+    fix_frame, imu_frame, no_fix, null_island, no_rate = None, None, 0, 0, 0
     # messages whose numbers are NaN or infinite (a receiver's "no value"), dropped and counted per topic
     not_finite: dict[str, int] = {}
     try:
@@ -373,6 +376,7 @@ def import_rosbag(bag: Path | str, wheel_topic: str | None = None, left_joint: s
             use = [c for c in conns if c.topic in chosen.values() or c.topic in (tick_topics or ())]
             ticks = {t: [] for t in tick_topics or ()}
             joints = None
+            joints_error, other_joints = None, 0
             origin_ns = None
             for conn, t_rx, raw in reader.messages(connections=use):
                 msg = reader.deserialize(raw, conn.msgtype)
@@ -386,11 +390,23 @@ def import_rosbag(bag: Path | str, wheel_topic: str | None = None, left_joint: s
                 if conn.topic == chosen["wheels"]:
                     if kind == "joints":
                         names = list(msg.name)
-                        if joints is None or joints[0] not in names or joints[1] not in names:
-                            joints = _wheel_joints(bag, conn.topic, names, left_joint, right_joint)
-                            il, ir = names.index(joints[0]), names.index(joints[1])
+                        if joints is None:
+                            try:
+                                joints = _wheel_joints(bag, conn.topic, names, left_joint, right_joint)
+                            except LogFormatError as exc:
+                                # another publisher on the topic (an arm's joints): skipped, counted
+                                joints_error, other_joints = exc, other_joints + 1
+                                continue
+                        if joints[0] not in names or joints[1] not in names:
+                            other_joints += 1
+                            continue
+                        # by name in every message: a driver may order its joints differently each time
+                        il, ir = names.index(joints[0]), names.index(joints[1])
                         pos = np.asarray(msg.position, float)
                         vel = np.asarray(msg.velocity, float)
+                        # arrays shorter than the names carry nothing for those joints
+                        pos = pos if pos.size == len(names) else np.zeros(0)
+                        vel = vel if vel.size == len(names) else np.zeros(0)
                         used = pos[[il, ir]] if pos.size else (vel[[il, ir]] if vel.size else np.zeros(2))
                         if not np.all(np.isfinite(used)):
                             not_finite[conn.topic] = not_finite.get(conn.topic, 0) + 1
@@ -413,11 +429,17 @@ def import_rosbag(bag: Path | str, wheel_topic: str | None = None, left_joint: s
                     if not (np.isfinite(msg.latitude) and np.isfinite(msg.longitude)):
                         not_finite[conn.topic] = not_finite.get(conn.topic, 0) + 1
                         continue
+                    if msg.latitude == 0.0 and msg.longitude == 0.0:
+                        null_island += 1      # a receiver's placeholder before its first fix
+                        continue
                     cov = np.asarray(msg.position_covariance, float)
                     sig = float(np.sqrt(0.5 * (cov[0] + cov[4]))) if msg.position_covariance_type > 0 else np.nan
                     fixes.append((stamp, msg.latitude, msg.longitude, sig))
                 else:
                     imu_frame = msg.header.frame_id.lstrip("/")
+                    if msg.angular_velocity_covariance[0] == -1.0:
+                        no_rate += 1          # REP 145: this IMU does not measure angular velocity
+                        continue
                     a = msg.angular_velocity
                     if not (np.isfinite(a.x) and np.isfinite(a.y) and np.isfinite(a.z)):
                         not_finite[conn.topic] = not_finite.get(conn.topic, 0) + 1
@@ -428,6 +450,18 @@ def import_rosbag(bag: Path | str, wheel_topic: str | None = None, left_joint: s
         raise
     except Exception as exc:  # rosbags raises its own types for unreadable bags
         raise LogFormatError(bag, f"cannot read the bag: {exc}") from None
+    if kind == "joints" and joints is None:
+        raise joints_error or LogFormatError(bag, f"{chosen['wheels']}: no JointState message")
+    if other_joints:
+        notes.append(f"{chosen['wheels']}: {other_joints} messages without the wheel joints {list(joints)} skipped "
+                     "(another publisher on the topic)")
+    if null_island:
+        notes.append(f"{chosen['gps']}: {null_island} fixes at latitude 0, longitude 0 (a receiver's placeholder "
+                     "before its first fix) dropped")
+    if no_rate:
+        line = (f"{chosen['imu']}: {no_rate} messages without angular velocity (angular_velocity_covariance[0] = -1, "
+                "REP 145) dropped")
+        (notes if rates else warnings).append(line + ("" if rates else ": the IMU gives no yaw rate, so no gyro"))
     enc = None
     if kind == "ticks":
         sides = []
@@ -440,11 +474,13 @@ def import_rosbag(bag: Path | str, wheel_topic: str | None = None, left_joint: s
         # the wheels' speeds, for the IMU axis check below
         ws = WheelSpeeds(enc.t[1:], enc.ticks_left[1:] / (tpm[0] * dt), enc.ticks_right[1:] / (tpm[1] * dt))
     else:
-        ws = _wheel_speeds(bag, chosen["wheels"], kind, wheels, wheel_radius, track_width)
+        ws = _wheel_speeds(bag, chosen["wheels"], kind, wheels, wheel_radius, track_width, notes)
     if kind not in ("joints", "ticks"):
         notes.append(f"wheels from the {'odometry twist' if kind == 'odometry' else 'TwistStamped'} of "
                      f"{chosen['wheels']} through the nominal track "
-                     f"({track_width:g} m): this assumes that odometry came from the wheels alone")
+                     f"({track_width:g} m): this assumes that odometry came from the wheels alone, and that "
+                     f"{track_width:g} m is the wheel_separation its controller used (the calibrated track is "
+                     "relative to it)")
     gps, origin, gps_sigma = None, None, 0.05
     if no_fix:
         notes.append(f"{chosen['gps']}: {no_fix} messages without a fix (status < 0) dropped")
@@ -453,12 +489,23 @@ def import_rosbag(bag: Path | str, wheel_topic: str | None = None, left_joint: s
     if fixes:
         f = np.array(fixes)
         tf, lat, lon, sig = _increasing(f[:, 0], f[:, 1], f[:, 2], f[:, 3])
+        _said_equal_stamps(chosen["gps"], len(f), len(tf), notes)
         origin = (float(lat[0]), float(lon[0]))
         x, y = latlon_to_local(lat, lon, *origin)
-        if np.all(np.isfinite(sig)) and np.all(sig > 0):
+        known = np.isfinite(sig) & (sig > 0)
+        if known.all():
             gps, gps_sigma = Gps(tf, x, y, sig), float(np.median(sig))
+        elif known.any():
+            # One fix's NaN covariance used to drop every fix's sigma (a probe: RTK fixes at 2 cm
+            # taken at the 5 cm default, 637 of 1800 rejected). The others' median stands in.
+            gps_sigma = float(np.median(sig[known]))
+            gps = Gps(tf, x, y, np.where(known, sig, gps_sigma))
+            notes.append(f"{chosen['gps']}: {int((~known).sum())} of {known.size} fixes carry no usable covariance "
+                         f"(NaN, zero, or type unknown): they take the others' median sigma, {gps_sigma:.3g} m")
         else:
             gps = Gps(tf, x, y)
+            notes.append(f"{chosen['gps']}: no fix carries a usable covariance: sigma {gps_sigma:g} m assumed "
+                         "(robot.toml [gps] sigma; the estimators' noise fit measures it)")
         if gps_lever_arm is None:
             gps_lever_arm = _lever_from_tf(frames, fix_frame, notes)
             if gps_lever_arm == (0.0, 0.0) and not any("lever arm (" in n for n in notes):
@@ -466,9 +513,14 @@ def import_rosbag(bag: Path | str, wheel_topic: str | None = None, left_joint: s
                                 f"{fix_frame!r}) and taken as (0, 0); an antenna off the robot's centre then looks "
                                 "like a GPS time offset or a wrong track: give --gps-lever-arm X,Y")
     gyro = None
+    if rates and not np.any(np.array(rates)[:, 1:]):
+        warnings.append(f"{chosen['imu']}: every angular velocity is exactly zero (an IMU that does not measure it): "
+                        "no gyro")
+        rates = []
     if rates:
         g = np.array(rates)
         tg, wx, wy, wz = _increasing(g[:, 0], g[:, 1], g[:, 2], g[:, 3])
+        _said_equal_stamps(chosen["imu"], len(g), len(tg), notes)
         mount = next((frames[(p, imu_frame)][1] for p in BASE_FRAMES if (p, imu_frame) in frames), None)
         if imu_axis == "auto" and mount is not None:
             # The robot's yaw rate is the z row of the rotation into base_link.
@@ -490,14 +542,32 @@ def import_rosbag(bag: Path | str, wheel_topic: str | None = None, left_joint: s
                t_origin=(origin_ns or 0) // 1_000_000_000)
 
 
-def _wheel_speeds(bag, topic, kind, rows, wheel_radius, track_width) -> WheelSpeeds:
+def _said_equal_stamps(topic, n_in: int, n_out: int, notes: list) -> None:
+    """A note when messages shared a stamp with an earlier one (only the
+    first of each stamp is kept): many such mean a coarse clock."""
+    if n_out < n_in:
+        notes.append(f"{topic}: {n_in - n_out} of {n_in} messages repeat an earlier stamp and were dropped"
+                     + ("; the header stamps look coarse: --stamps receive uses the bag's receive times"
+                        if n_out < 0.9 * n_in else ""))
+
+
+def _wheel_speeds(bag, topic, kind, rows, wheel_radius, track_width, notes) -> WheelSpeeds:
     if len(rows) < 2:
         raise LogFormatError(bag, f"{topic}: fewer than two wheel messages")
     j = np.array(rows)
     t, a, b, vl, vr = _increasing(j[:, 0], j[:, 1], j[:, 2], j[:, 3], j[:, 4])
+    if len(t) < 2:
+        raise LogFormatError(bag, f"{topic}: all {len(j)} wheel messages carry the same header stamp; "
+                                  "--stamps receive uses the bag's receive times")
+    _said_equal_stamps(topic, len(j), len(t), notes)
     if kind != "joints":
         v, om = a, b
         return WheelSpeeds(t, v - 0.5 * track_width * om, v + 0.5 * track_width * om)
+    still = np.ptp(a) == 0 and np.ptp(b) == 0 if np.all(np.isfinite(a)) and np.all(np.isfinite(b)) else False
+    if still and np.all(np.isfinite(vl)) and np.all(np.isfinite(vr)) and np.any(vl) | np.any(vr):
+        # positions that never change beside velocities that do: a placeholder, not a robot at rest
+        notes.append(f"{topic}: the wheel positions never change while the velocities do: velocities used")
+        return WheelSpeeds(t, vl * wheel_radius, vr * wheel_radius)
     if np.all(np.isfinite(a)) and np.all(np.isfinite(b)):
         dt = np.diff(t)
         return WheelSpeeds(0.5 * (t[1:] + t[:-1]), np.diff(a) * wheel_radius / dt, np.diff(b) * wheel_radius / dt)
@@ -527,7 +597,9 @@ def _yaw_axis(axis: str, ws: WheelSpeeds, track: float, t: np.ndarray, rates: di
     w = np.interp(t, ws.t, (ws.v_right - ws.v_left) / track)
     inside = (t >= ws.t[0]) & (t <= ws.t[-1])
     if inside.sum() < 30 or np.std(w[inside]) < MIN_TURN:
-        return rates["z"], None
+        # too little turning to tell the axis (or its sign) from the data
+        return rates["z"], (f"{topic}: the run turns too little to tell the IMU's yaw axis from the data: z taken "
+                            "as mounted upright; check the mounting, or give --imu-axis (or /tf_static)")
     corr = {a: (float(np.corrcoef(rates[a][inside], w[inside])[0, 1]) if np.std(rates[a][inside]) > 0 else 0.0)
             for a in AXES}
     best = max(AXES, key=lambda a: abs(corr[a]))
