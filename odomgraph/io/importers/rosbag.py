@@ -144,11 +144,29 @@ def _tick_pair(conns) -> tuple[str, str] | None:
     return (ls[0], rs[0]) if len(ls) == 1 and len(rs) == 1 else None
 
 
-def _unwrap_counts(c: np.ndarray, bits: int | None) -> np.ndarray:
+def _unwrap_counts(c: np.ndarray, bits: int | None, notes: list | None = None, topic: str = "") -> np.ndarray:
     """Cumulative tick counts with the counter's wrap-around removed (a 16-bit
-    counter wraps every 65536 ticks: a few metres on a small robot)."""
+    counter wraps every 65536 ticks: a few metres on a small robot). A
+    narrower counter carried in a wider message (a 16-bit encoder in an
+    Int32, as microcontroller bridges publish it) is found from its values:
+    all inside the narrow range, with jumps that the narrow wrap makes small."""
     c = np.asarray(c, dtype=np.int64)
-    if bits is None or c.size < 2:
+    if c.size < 2:
+        return c
+    for narrow in (16, 32):
+        if narrow >= (bits or 64):                      # (64 bits: no wrap in any robot's life)
+            break
+        if c.min() < -(1 << (narrow - 1)) or c.max() > (1 << narrow) - 1:
+            continue                                    # beyond the narrow range: wider than it
+        d = np.diff(c)
+        wrapped = (d + (1 << (narrow - 1))) % (1 << narrow) - (1 << (narrow - 1))
+        if np.any(np.abs(d) >= 1 << (narrow - 1)) and np.abs(wrapped).max() < 1 << (narrow - 2):
+            if notes is not None:
+                notes.append(f"{topic}: the counter wraps at {narrow} bits inside its {bits or 64}-bit message: "
+                             "unwrapped")
+            bits = narrow
+        break
+    if bits is None:
         return c
     full, half = 1 << bits, 1 << (bits - 1)
     d = (np.diff(c) + half) % full - half
@@ -168,7 +186,7 @@ def _encoders_from_ticks(bag, left: tuple, right: tuple, notes: list) -> Encoder
     tr, cr, br = right
     if len(tl) < 3 or len(tr) < 3:
         raise LogFormatError(bag, "tick topics: fewer than three messages on a wheel")
-    cl, cr = _unwrap_counts(cl, bl), _unwrap_counts(cr, br)
+    cl, cr = _unwrap_counts(cl, bl, notes, "left ticks"), _unwrap_counts(cr, br, notes, "right ticks")
     swap = len(tr) < len(tl)           # rows on the sparser counter
     (ta, ca), (tb, cb) = ((tr, cr), (tl, cl)) if swap else ((tl, cl), (tr, cr))
     quarter = 0.25 * float(min(np.median(np.diff(ta)), np.median(np.diff(tb))))
@@ -569,11 +587,23 @@ def _wheel_speeds(bag, topic, kind, rows, wheel_radius, track_width, notes) -> W
         notes.append(f"{topic}: the wheel positions never change while the velocities do: velocities used")
         return WheelSpeeds(t, vl * wheel_radius, vr * wheel_radius)
     if np.all(np.isfinite(a)) and np.all(np.isfinite(b)):
+        a, b = (_unwrap_angle(x, topic, side, notes) for x, side in ((a, "left"), (b, "right")))
         dt = np.diff(t)
         return WheelSpeeds(0.5 * (t[1:] + t[:-1]), np.diff(a) * wheel_radius / dt, np.diff(b) * wheel_radius / dt)
     if np.all(np.isfinite(vl)) and np.all(np.isfinite(vr)):
         return WheelSpeeds(t, vl * wheel_radius, vr * wheel_radius)
     raise LogFormatError(bag, f"{topic}: JointState has neither positions nor velocities for the wheels")
+
+
+def _unwrap_angle(x: np.ndarray, topic: str, side: str, notes: list) -> np.ndarray:
+    """A wheel joint's position [rad], unwrapped when the driver reports it
+    modulo 2 pi (every value within one turn, steps beyond half a turn: a
+    wheel turning half a turn between two messages would be 10 m/s at
+    20 Hz on a 0.15 m wheel)."""
+    if x.size > 2 and np.abs(x).max() <= 2 * np.pi + 1e-6 and np.any(np.abs(np.diff(x)) > np.pi):
+        notes.append(f"{topic}: the {side} wheel's position wraps at a full turn: unwrapped")
+        return np.unwrap(x)
+    return x
 
 
 def _lever_from_tf(frames, fix_frame, notes) -> tuple[float, float]:
