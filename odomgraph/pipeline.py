@@ -336,9 +336,10 @@ def _estimate_checked(log: Log, method: Method, schedule: Schedule, progress, op
     if log.gps is not None and not est.time_offsets:
         from odomgraph.analysis.timing import gps_offset_warnings
         suspect += gps_offset_warnings(log, est)
-    from odomgraph.analysis.gyrotiming import gyro_offset_warnings
+    from odomgraph.analysis.gyrotiming import gyro_offset_warnings, wheels_late_lines
     from odomgraph.analysis.wheelgaps import lost_tick_warnings
-    suspect += (gyro_offset_warnings(log) + _gap_warnings(est, log, options) + _revision_warnings(est)
+    suspect += gyro_offset_warnings(log)
+    suspect += (wheels_late_lines(suspect) + _gap_warnings(est, log, options) + _revision_warnings(est)
                 + lost_tick_warnings(log))
     est.warnings += [w for w in suspect if w not in est.warnings] + _window_warnings(est, log, schedule)
     est.flags += suspect
@@ -1144,8 +1145,10 @@ def _calibration_checks(log: Log, est: Estimate, k, sk, method: Method, schedule
         from odomgraph.analysis.timing import gps_offset_warnings
         # A plain clock line gets the option that estimates it; a lever-arm
         # line, or one that cannot tell the two apart, names its own remedy.
+        # (unless the gyro looks off alike: then the wheels' stamps are, wheels_late_lines)
+        wheels_late = any(w.startswith("the GPS and the gyro both look") for w in est.flags)
         problems += [f"{w} (calibrate --time-offset estimates it)"
-                     if w.startswith("GPS time stamps look") and "lever arm" not in w else w
+                     if w.startswith("GPS time stamps look") and "lever arm" not in w and not wheels_late else w
                      for w in gps_offset_warnings(log, est)]
     # So does a gyro clock off (every turn reads as slip), and an estimate no
     # robot can have driven (analysis.plausible: a wheel that skids for good

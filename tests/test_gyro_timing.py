@@ -76,3 +76,41 @@ def test_calibrate_refuses_a_late_gyro():
     said = [w for w in rep["problems"] if w.startswith("gyro time stamps look")]
     assert len(said) == 1, rep["problems"]
     assert float(said[0].split("look ")[1].split(" s late")[0]) == pytest.approx(0.3, abs=0.03)
+
+
+@pytest.mark.parametrize("make, seed, lag", [(paper, 71, 0.15), (yard, 72, 0.25)])
+def test_both_references_late_alike_name_the_wheels(make, seed, lag, tmp_path):
+    """Wheel stamps late (an odometry filter's lag: a hostile probe's
+    diff_drive_controller with its 10-sample rolling window) made the GPS and
+    the gyro both look early, and calibrate advised --time-offset for the
+    GPS, which mends neither. Now one more line names the wheels, and
+    calibrate's refusal drops that advice."""
+    from dataclasses import replace
+    from odomgraph.errors import CalibrationRejectedError
+    from odomgraph.pipeline import calibrate_to_file
+    log = inject(make(90.0 if make is paper else 120.0), Faults(), seed)
+    late = log.with_(encoders=replace(log.encoders, t=log.encoders.t + lag))
+    cal = Schedule(20.0 if make is paper else 30.0)
+    est = estimate(late, "batch", cal)
+    line = [f for f in est.flags if f.startswith("the GPS and the gyro both look")]
+    assert len(line) == 1 and f"re-stamp the wheels (t less {lag:.2f} s)" in line[0], est.flags
+    with pytest.raises(CalibrationRejectedError) as exc:
+        calibrate_to_file(late, tmp_path / "cal.toml", cal, tune=False)
+    assert "re-stamp the wheels" in str(exc.value) and "--time-offset estimates it" not in str(exc.value)
+    # the GPS alone late: its own line, not the wheels'
+    g = log.gps
+    gps_late = log.with_(gps=replace(g, t=g.t + 0.2))
+    flags = estimate(gps_late, "batch", cal).flags
+    assert any(f.startswith("GPS time stamps look") for f in flags)
+    assert not any(f.startswith("the GPS and the gyro both look") for f in flags), flags
+
+
+def test_wheels_late_lines_compare_the_two_offsets():
+    from odomgraph.analysis.gyrotiming import wheels_late_lines
+    gps = "GPS time stamps look {:+.2f} s late (sigma {:.2f} s) against the wheels: ..."
+    gyro = "gyro time stamps look {:+.2f} s late (sigma {:.2f} s) against the wheels: ..."
+    assert len(wheels_late_lines([gps.format(-0.10, 0.02), gyro.format(-0.12, 0.01)])) == 1
+    assert wheels_late_lines([gps.format(-0.10, 0.01), gyro.format(-0.20, 0.01)]) == []      # not alike
+    assert wheels_late_lines([gps.format(0.10, 0.05), gyro.format(-0.05, 0.05)]) == []       # opposite signs
+    assert wheels_late_lines([gps.format(-0.10, 0.02)]) == []
+    assert wheels_late_lines([gps.format(-0.10, 0.02) + " or a GPS lever arm ...", gyro.format(-0.1, 0.01)]) == []

@@ -22,6 +22,8 @@ combined, and a clock that jumps is found, as the GPS's are
 """
 from __future__ import annotations
 
+import re
+
 import numpy as np
 
 from odomgraph.analysis.timing import N_SIGMA, Offset, combine, jump
@@ -140,3 +142,36 @@ def gyro_offset_warnings(log) -> list[str]:
                    f"{b.t0 + WINDOW:.0f} s (offsets {a.delta:+.2f} s before, {b.delta:+.2f} s after) against the "
                    "wheels: the scale factors bend to explain it")
     return out
+
+
+#: The GPS's and the gyro's whole-log offsets (as their lines say them).
+_LATE = re.compile(r"^(GPS|gyro) time stamps look ([+-]\d+\.\d+) s late \(sigma (\d+\.\d+) s\)")
+#: ...that agree within this many of their joint sigmas (plus the lines' rounding) name the wheels.
+ALIKE_SIGMAS = 2.0
+
+
+def wheels_late_lines(lines: list[str]) -> list[str]:
+    """One line when the GPS and the gyro both look late (or early) against
+    the wheels by the same amount: two reference clocks off alike is far
+    less likely than the wheels' own stamps off, such as an odometry
+    filter's lag (diff_drive_controller's velocity_rolling_window_size
+    averages the last speeds; a probe's 10-sample window at 50 Hz made both
+    references look 0.10 s early, and calibrate advised --time-offset for
+    the GPS, which mends neither). ``lines``: the flags gps_offset_warnings
+    and gyro_offset_warnings gave (their texts are this module's and
+    analysis.timing's own)."""
+    found = {}
+    for line in lines:
+        m = _LATE.match(line)
+        if m and "lever arm" not in line:
+            found.setdefault(m.group(1), (float(m.group(2)), float(m.group(3))))
+    if len(found) < 2:
+        return []
+    (dg, sg), (dw, sw) = found["GPS"], found["gyro"]
+    if np.sign(dg) != np.sign(dw) or abs(dg - dw) > ALIKE_SIGMAS * np.hypot(sg, sw) + 0.01:
+        return []
+    lag = -0.5 * (dg + dw)
+    return [f"the GPS and the gyro both look about {-lag:+.2f} s late against the wheels: the wheels' own stamps "
+            f"are likelier {lag:+.2f} s off than two clocks alike (an odometry filter's lag, such as "
+            "diff_drive_controller's velocity_rolling_window_size); re-stamp the wheels (t less "
+            f"{lag:.2f} s), not the GPS or the gyro; not trustworthy"]
