@@ -1376,7 +1376,9 @@ def outrun(results: Path) -> str:
             f"(thresholds: {th['distance_m']:g} m and z {th['peak_z']:g}, both). Fixes shifted 0.5–1.5 m along "
             f"the path outside the wheels' slip events (straight, backwards, ramped, in a turn; {s['runs']} runs): "
             f"{s['honest']} flagged, stopped, `degraded` by another check or right within 3σ and 0.1 m "
-            f"({s['flagged']} flagged by this check).\n\n  " + _source("outrun", d))
+            f"({s['flagged']} flagged by this check)"
+            + (f"; not: {'; '.join(s['not_honest'])} (the table in `benchmarks/README.md` has its numbers)"
+               if s.get("not_honest") else "") + ".\n\n  " + _source("outrun", d))
 
 
 def outrun_missed(results: Path) -> str:

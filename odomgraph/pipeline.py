@@ -336,11 +336,12 @@ def _estimate_checked(log: Log, method: Method, schedule: Schedule, progress, op
     if log.gps is not None and not est.time_offsets:
         from odomgraph.analysis.timing import gps_offset_warnings
         suspect += gps_offset_warnings(log, est)
-    from odomgraph.analysis.gyrotiming import gyro_offset_warnings, wheels_late_lines
+    from odomgraph.analysis.gyrotiming import gyro_offset_warnings, wheels_late_lines, without_reference_clocks
     from odomgraph.analysis.wheelgaps import lost_tick_warnings
     suspect += gyro_offset_warnings(log)
-    suspect += (wheels_late_lines(suspect) + _gap_warnings(est, log, options) + _revision_warnings(est)
-                + lost_tick_warnings(log))
+    # both references off alike: the wheels' stamps are, and one line says so in place of theirs
+    suspect = without_reference_clocks(suspect + wheels_late_lines(suspect))
+    suspect += _gap_warnings(est, log, options) + _revision_warnings(est) + lost_tick_warnings(log)
     est.warnings += [w for w in suspect if w not in est.warnings] + _window_warnings(est, log, schedule)
     est.flags += suspect
     _note_motion_scales(est, log, motion)
@@ -1145,11 +1146,13 @@ def _calibration_checks(log: Log, est: Estimate, k, sk, method: Method, schedule
         from odomgraph.analysis.timing import gps_offset_warnings
         # A plain clock line gets the option that estimates it; a lever-arm
         # line, or one that cannot tell the two apart, names its own remedy.
-        # (unless the gyro looks off alike: then the wheels' stamps are, wheels_late_lines)
-        wheels_late = any(w.startswith("the GPS and the gyro both look") for w in est.flags)
-        problems += [f"{w} (calibrate --time-offset estimates it)"
-                     if w.startswith("GPS time stamps look") and "lever arm" not in w and not wheels_late else w
-                     for w in gps_offset_warnings(log, est)]
+        # Unless the gyro looks off alike: then the wheels' stamps are, estimate's flags say so
+        # (gyrotiming.wheels_late_lines), and the GPS's own line would mislead.
+        from odomgraph.analysis.gyrotiming import WHEELS_LATE
+        wheels_late = any(w.startswith(WHEELS_LATE) for w in est.flags)
+        clock = lambda w: w.startswith("GPS time stamps look") and "lever arm" not in w   # noqa: E731
+        problems += [f"{w} (calibrate --time-offset estimates it)" if clock(w) else w
+                     for w in gps_offset_warnings(log, est) if not (wheels_late and clock(w))]
     # So does a gyro clock off (every turn reads as slip), and an estimate no
     # robot can have driven (analysis.plausible: a wheel that skids for good
     # after slip went into its scale, or the mirror solution).

@@ -310,3 +310,16 @@ def test_references_that_ran_long_before_the_wheels(tmp_path):
     new, rep = calibrate_to_file(early, tmp_path / "cal.toml", Schedule(200.0), Method.batch, tune=False)
     assert rep["held_out"]["passed"], rep["held_out"]
     assert new.track_width == pytest.approx(sc.scales[2] * log.robot.track_width, rel=0.01)
+
+
+def test_an_empty_reference_file_leaves_no_split_and_no_traceback(tmp_path):
+    """A gps.csv holding only its header (a review: split_time read its
+    first stamp and calibrate stopped with an IndexError): the gyro holds
+    out instead."""
+    from odomgraph.io.log import Gps
+    sc, log = _log("paper", 13, 60.0)
+    empty = log.with_(gps=Gps(np.zeros(0), np.zeros(0), np.zeros(0)))
+    t0 = split_time(empty)
+    g = log.gyro.t
+    assert t0 == pytest.approx(g[0] + TRAIN_SHARE * (g[-1] - g[0]), abs=0.1)
+    assert split_time(empty.with_(gyro=log.gyro.__class__(np.zeros(0), np.zeros(0)))) is None

@@ -23,7 +23,7 @@ JOINTS = ["left_wheel_joint", "right_wheel_joint"]
 
 
 def _bag(path: Path, log, order=lambda k: JOINTS, arm_every=0, fix=None, imu_cov=0.0, imu_rate=None,
-         stamp=lambda t: t, positions=True, velocities=False, wrap=False):
+         stamp=lambda t: t, positions=True, velocities=False, wrap=False, arm_names=("arm_shoulder", "arm_elbow"), fix_stamp=None):
     """A ROS 2 bag of ``log``: JointState wheels (joint names per message
     from ``order(k)``; every ``arm_every``-th message an arm's JointState on
     the same topic; ``wrap``: positions modulo 2 pi), NavSatFix (``fix(k, lat, lon, cov)`` may change a fix),
@@ -37,7 +37,7 @@ def _bag(path: Path, log, order=lambda k: JOINTS, arm_every=0, fix=None, imu_cov
     Q = T["geometry_msgs/msg/Quaternion"]
 
     def header(t, frame="base_link"):
-        t = stamp(t)
+        t = fix_stamp(t) if frame == "gps" and fix_stamp is not None else stamp(t)
         sec = int(np.floor(t))
         return Header(stamp=Time(sec=sec, nanosec=int(round((t - sec) * 1e9))), frame_id=frame)
 
@@ -68,9 +68,10 @@ def _bag(path: Path, log, order=lambda k: JOINTS, arm_every=0, fix=None, imu_cov
                      effort=np.array([], float))
             w.write(cj, at(t), ts.serialize_cdr(msg, "sensor_msgs/msg/JointState"))
             if arm_every and k % arm_every == 0:
-                arm = JS(header=header(t + 0.001), name=["arm_shoulder", "arm_elbow"], position=np.array([0.1, 0.2]),
+                # before the wheels' message of the same time: another publisher may come first
+                arm = JS(header=header(t - 0.001), name=list(arm_names), position=np.array([0.1, 0.2]),
                          velocity=np.array([], float), effort=np.array([], float))
-                w.write(cj, at(t + 0.001), ts.serialize_cdr(arm, "sensor_msgs/msg/JointState"))
+                w.write(cj, at(t - 0.001), ts.serialize_cdr(arm, "sensor_msgs/msg/JointState"))
         g = log.gps
         for k, (t, x, y) in enumerate(zip(g.t, g.x, g.y)):
             lat, lon, cov = LAT0 + y / m_lat, LON0 + x / m_lon, np.diag([r.gps_sigma**2] * 3).ravel()
@@ -119,6 +120,9 @@ def test_joints_are_looked_up_by_name_in_every_message(sim, clean, tmp_path):
     np.testing.assert_array_equal(arm.wheel_speeds.v_left, clean.wheel_speeds.v_left)
     n_arm = len(range(0, len(sim.encoders.t), 3))
     assert any(f"{n_arm} messages without the wheel joints" in n and "another publisher" in n for n in arm.notes)
+    # a gripper whose joints say left and right, publishing first (a review): the wheels' joints still win
+    grip = _imp(_bag(tmp_path / "grip", sim, arm_every=2, arm_names=("gripper_left_finger", "gripper_right_finger")))
+    np.testing.assert_array_equal(grip.wheel_speeds.v_left, clean.wheel_speeds.v_left)
     given = _imp(tmp_path / "arm", left_joint="left_wheel_joint", right_joint="right_wheel_joint")
     np.testing.assert_array_equal(given.wheel_speeds.v_right, clean.wheel_speeds.v_right)
     with pytest.raises(LogFormatError, match="joints 'l'/'r' not in"):
@@ -144,7 +148,9 @@ def test_fixes_without_a_covariance_or_a_position(sim, clean, tmp_path):
         c = np.diag([0.02**2, 0.02**2, 0.05**2]).ravel()
         return lat, lon, np.full(9, np.nan) if k == 7 else c
     log = _imp(_bag(tmp_path / "nan", sim, fix=rtk))
-    assert log.gps.sigma is not None and np.all(log.gps.sigma == pytest.approx(0.02))
+    # the others keep their 2 cm; the one without takes the largest known, at least the 5 cm default
+    assert log.gps.sigma is not None and log.gps.sigma[7] == pytest.approx(0.05)
+    assert np.all(np.delete(log.gps.sigma, 7) == pytest.approx(0.02)) and log.robot.gps_sigma == pytest.approx(0.02)
     assert any("1 of" in n and "no usable covariance" in n for n in log.notes)
 
     def null(k, lat, lon, cov):
@@ -177,6 +183,9 @@ def test_repeated_header_stamps_are_counted(sim, tmp_path):
     assert len(fine.wheel_speeds.t) > 5 * len(coarse.wheel_speeds.t)
     with pytest.raises(LogFormatError, match="same header stamp; --stamps receive"):
         _imp(_bag(tmp_path / "equal", sim, stamp=lambda t: 5.0))
+    # a GPS driver that never sets its stamp: left out, with a warning (it was one fix)
+    log = _imp(_bag(tmp_path / "gps-equal", sim, fix_stamp=lambda t: 5.0))
+    assert log.gps is None and any("/fix: all" in w and "same header stamp: left out" in w for w in log.warnings)
 
 
 def test_too_little_turning_to_tell_the_imu_axis_is_said(tmp_path):
@@ -234,3 +243,18 @@ def test_a_16_bit_counter_in_a_wider_message_is_unwrapped(sim, tmp_path, msgtype
     np.testing.assert_array_equal(np.cumsum(log.encoders.ticks_left), left - left[0])
     np.testing.assert_array_equal(np.cumsum(log.encoders.ticks_right), right - right[0])
     assert any("wraps at 16 bits inside its" in n for n in log.notes)
+
+
+def test_a_wide_counter_that_jumps_is_not_taken_for_a_wrap(tmp_path):
+    """An Int32 counter that stays inside 16 bits and jumps once by 50000
+    (a reset or a gap, not a wrap: it does not cross the range's ends) is
+    left as it is; a 32-bit counter in an Int64 that wraps is unwrapped at 32."""
+    from odomgraph.io.importers.rosbag import _unwrap_counts
+    jump = np.concatenate([np.arange(0, 10001, 500), np.arange(60000, 65001, 500)])
+    notes = []
+    np.testing.assert_array_equal(_unwrap_counts(jump, 32, notes, "t"), jump)
+    assert notes == []
+    wide = np.arange(0, 20 * 2**28, 2**28) % 2**32              # 2^28 ticks a message: a 32-bit wrap at 16
+    out = _unwrap_counts(wide, None, notes, "t")
+    np.testing.assert_array_equal(out, np.arange(0, 20 * 2**28, 2**28))
+    assert notes == ["t: the counter wraps at 32 bits inside its 64-bit message: unwrapped"]

@@ -148,6 +148,8 @@ def gyro_offset_warnings(log) -> list[str]:
 _LATE = re.compile(r"^(GPS|gyro) time stamps look ([+-]\d+\.\d+) s late \(sigma (\d+\.\d+) s\)")
 #: ...that agree within this many of their joint sigmas (plus the lines' rounding) name the wheels.
 ALIKE_SIGMAS = 2.0
+#: How wheels_late_lines' line begins.
+WHEELS_LATE = "the GPS ("
 
 
 def wheels_late_lines(lines: list[str]) -> list[str]:
@@ -168,10 +170,22 @@ def wheels_late_lines(lines: list[str]) -> list[str]:
     if len(found) < 2:
         return []
     (dg, sg), (dw, sw) = found["GPS"], found["gyro"]
-    if np.sign(dg) != np.sign(dw) or abs(dg - dw) > ALIKE_SIGMAS * np.hypot(sg, sw) + 0.01:
+    # alike: each within ALIKE_SIGMAS of their inverse-variance mean (plus the lines' rounding)
+    wg, ww = 1.0 / max(sg, 0.005) ** 2, 1.0 / max(sw, 0.005) ** 2
+    mean = (wg * dg + ww * dw) / (wg + ww)
+    if np.sign(dg) != np.sign(dw) or any(abs(d - mean) > ALIKE_SIGMAS * sd + 0.01 for d, sd in ((dg, sg), (dw, sw))):
         return []
-    lag = -0.5 * (dg + dw)
-    return [f"the GPS and the gyro both look about {-lag:+.2f} s late against the wheels: the wheels' own stamps "
-            f"are likelier {lag:+.2f} s off than two clocks alike (an odometry filter's lag, such as "
-            "diff_drive_controller's velocity_rolling_window_size); re-stamp the wheels (t less "
-            f"{lag:.2f} s), not the GPS or the gyro; not trustworthy"]
+    return [f"the GPS ({dg:+.2f} s, sigma {sg:.2f}) and the gyro ({dw:+.2f} s, sigma {sw:.2f}) both look late "
+            f"against the wheels by about {mean:+.2f} s: the wheels' own stamps are likelier off than two clocks "
+            "alike (an odometry filter's lag, such as diff_drive_controller's velocity_rolling_window_size); "
+            f"re-stamp the wheels' file ({'t less' if mean < 0 else 't plus'} {abs(mean):.2f} s), not the GPS "
+            "or the gyro; not trustworthy"]
+
+
+def without_reference_clocks(lines: list[str]) -> list[str]:
+    """``lines`` without the GPS's and the gyro's whole-log offset lines when
+    wheels_late_lines names the wheels instead (their remedies, re-stamping
+    the GPS or the gyro, would mend neither)."""
+    if not any(w.startswith(WHEELS_LATE) for w in lines):
+        return lines
+    return [w for w in lines if not (_LATE.match(w) and "lever arm" not in w)]

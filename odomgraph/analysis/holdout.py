@@ -71,7 +71,7 @@ def split_time(log) -> float | None:
     if wheels is None or len(wheels.t) < 2:
         return None
     for s in (log.gps, log.gyro):
-        if s is None:
+        if s is None or len(s.t) < 2 * MIN_FIXES:
             continue
         a, b = max(s.t[0], wheels.t[0]), min(s.t[-1], wheels.t[-1])
         inside = (s.t >= a) & (s.t <= b)

@@ -90,12 +90,13 @@ def _reader(bag: Path):
         if head != b"#ROSBAG V2.0\n":
             raise LogFormatError(bag, "is a file but not a ROS 1 bag (no '#ROSBAG V2.0' header); a ROS 2 bag is a "
                                       "directory with metadata.yaml")
-        # rosbags tells ROS 1 from ROS 2 by the name: read it through a *.bag link
         tmp = Path(tempfile.mkdtemp(prefix="odomgraph-bag-"))
-        link = tmp / (bag.name + ".bag")
-        link.symlink_to(bag.resolve())
-        bag = link
     try:
+        if tmp is not None:
+            # rosbags tells ROS 1 from ROS 2 by the name: read it through a *.bag link
+            link = tmp / (bag.name + ".bag")
+            link.symlink_to(bag.resolve())
+            bag = link
         with AnyReader([bag], default_typestore=get_typestore(Stores.ROS2_HUMBLE)) as reader:
             yield reader
     finally:
@@ -160,7 +161,17 @@ def _unwrap_counts(c: np.ndarray, bits: int | None, notes: list | None = None, t
             continue                                    # beyond the narrow range: wider than it
         d = np.diff(c)
         wrapped = (d + (1 << (narrow - 1))) % (1 << narrow) - (1 << (narrow - 1))
-        if np.any(np.abs(d) >= 1 << (narrow - 1)) and np.abs(wrapped).max() < 1 << (narrow - 2):
+        big = np.abs(d) >= 1 << (narrow - 1)
+        # each big step crosses the range's ends (top quarter to bottom quarter or back), as a wrap
+        # does; a counter reset or a gap jumps from anywhere (a review: 10000 -> 60000 is no wrap)
+        lo = -(1 << (narrow - 1)) if c.min() < 0 else 0        # a signed counter's range, or an unsigned one's
+        span = 1 << narrow
+        rel_a, rel_b = (c[:-1][big] - lo) / span, (c[1:][big] - lo) / span
+        crosses = np.all(((rel_a >= 0.75) & (rel_b < 0.25)) | ((rel_a < 0.25) & (rel_b >= 0.75)))
+        # ...and, wrapped, is a step like the others (10000 -> 60000 could be a backward wrap of 15536,
+        # but not among steps of 500)
+        typical = 8.0 * float(np.median(np.abs(d[~big]))) + 16.0 if (~big).any() else 0.0
+        if big.any() and crosses and np.abs(wrapped[big]).max() <= typical and np.abs(wrapped).max() < 1 << (narrow - 2):
             if notes is not None:
                 notes.append(f"{topic}: the counter wraps at {narrow} bits inside its {bits or 64}-bit message: "
                              "unwrapped")
@@ -294,6 +305,59 @@ def _wheel_joints(bag: Path, topic: str, names: list[str], left: str | None, rig
                               "give --left-joint and --right-joint")
 
 
+def _joint_rows(bag, topic: str, msgs: list, left: str | None, right: str | None, notes: list,
+                not_finite: dict) -> list[tuple]:
+    """Wheel rows (t, left position, right position, left velocity, right
+    velocity; NaN where a message has none) from a JointState topic's
+    messages ((t, names, positions, velocities) each). The two wheel joints
+    are the given ones, or the left/right pair found in the most messages,
+    joints named "wheel" first: a mobile manipulator's gripper publishing on
+    the same topic may come first. Joints are looked up by name in every
+    message (a driver may reorder them); messages without them (another
+    publisher's) are skipped and counted."""
+    if not msgs:
+        raise LogFormatError(bag, f"{topic}: no JointState message")
+    counts: dict[tuple, int] = {}
+    for _, names, _, _ in msgs:
+        counts[names] = counts.get(names, 0) + 1
+    if left and right:
+        joints = (left, right)
+        if not any(left in n and right in n for n in counts):
+            raise LogFormatError(bag, f"{topic}: joints {left!r}/{right!r} not in "
+                                      f"{sorted({j for n in counts for j in n})} (--left-joint/--right-joint)")
+    else:
+        pairs, error = {}, None
+        for names in counts:
+            try:
+                pair = _wheel_joints(bag, topic, list(names), left, right)
+            except LogFormatError as exc:
+                error = exc
+                continue
+            pairs[pair] = sum(c for n, c in counts.items() if pair[0] in n and pair[1] in n)
+        if not pairs:
+            raise error
+        joints = max(pairs, key=lambda pr: ("wheel" in pr[0].lower() and "wheel" in pr[1].lower(), pairs[pr]))
+    rows, other = [], 0
+    for stamp, names, pos, vel in msgs:
+        if joints[0] not in names or joints[1] not in names:
+            other += 1
+            continue
+        il, ir = names.index(joints[0]), names.index(joints[1])
+        # arrays of another length than the names carry nothing for these joints
+        pos = pos if pos.size == len(names) else np.zeros(0)
+        vel = vel if vel.size == len(names) else np.zeros(0)
+        used = pos[[il, ir]] if pos.size else (vel[[il, ir]] if vel.size else np.zeros(2))
+        if not np.all(np.isfinite(used)):
+            not_finite[topic] = not_finite.get(topic, 0) + 1
+            continue
+        rows.append((stamp, *(pos[[il, ir]] if pos.size else (np.nan, np.nan)),
+                     *(vel[[il, ir]] if vel.size else (np.nan, np.nan))))
+    if other:
+        notes.append(f"{topic}: {other} messages without the wheel joints {list(joints)} skipped (another publisher "
+                     "on the topic)")
+    return rows
+
+
 def import_rosbag(bag: Path | str, wheel_topic: str | None = None, left_joint: str | None = None,
                   right_joint: str | None = None, wheel_radius: float | None = None, track_width: float | None = None,
                   gps_topic: str | None = None, imu_topic: str | None = None, gyro_sigma: float = 0.01,
@@ -393,8 +457,7 @@ def import_rosbag(bag: Path | str, wheel_topic: str | None = None, left_joint: s
                                           "--wheel-radius [m]")
             use = [c for c in conns if c.topic in chosen.values() or c.topic in (tick_topics or ())]
             ticks = {t: [] for t in tick_topics or ()}
-            joints = None
-            joints_error, other_joints = None, 0
+            joint_msgs = []
             origin_ns = None
             for conn, t_rx, raw in reader.messages(connections=use):
                 msg = reader.deserialize(raw, conn.msgtype)
@@ -407,30 +470,10 @@ def import_rosbag(bag: Path | str, wheel_topic: str | None = None, left_joint: s
                 stamp = 1e-9 * (ns - origin_ns)
                 if conn.topic == chosen["wheels"]:
                     if kind == "joints":
-                        names = list(msg.name)
-                        if joints is None:
-                            try:
-                                joints = _wheel_joints(bag, conn.topic, names, left_joint, right_joint)
-                            except LogFormatError as exc:
-                                # another publisher on the topic (an arm's joints): skipped, counted
-                                joints_error, other_joints = exc, other_joints + 1
-                                continue
-                        if joints[0] not in names or joints[1] not in names:
-                            other_joints += 1
-                            continue
-                        # by name in every message: a driver may order its joints differently each time
-                        il, ir = names.index(joints[0]), names.index(joints[1])
-                        pos = np.asarray(msg.position, float)
-                        vel = np.asarray(msg.velocity, float)
-                        # arrays shorter than the names carry nothing for those joints
-                        pos = pos if pos.size == len(names) else np.zeros(0)
-                        vel = vel if vel.size == len(names) else np.zeros(0)
-                        used = pos[[il, ir]] if pos.size else (vel[[il, ir]] if vel.size else np.zeros(2))
-                        if not np.all(np.isfinite(used)):
-                            not_finite[conn.topic] = not_finite.get(conn.topic, 0) + 1
-                            continue
-                        wheels.append((stamp, *(pos[[il, ir]] if pos.size else (np.nan, np.nan)),
-                                       *(vel[[il, ir]] if vel.size else (np.nan, np.nan))))
+                        # the joints are chosen once the topic is read (_joint_rows): another
+                        # publisher's message may come first
+                        joint_msgs.append((stamp, tuple(msg.name), np.asarray(msg.position, float),
+                                           np.asarray(msg.velocity, float)))
                     else:
                         tw = msg.twist.twist if kind == "odometry" else msg.twist
                         if not (np.isfinite(tw.linear.x) and np.isfinite(tw.angular.z)):
@@ -468,11 +511,8 @@ def import_rosbag(bag: Path | str, wheel_topic: str | None = None, left_joint: s
         raise
     except Exception as exc:  # rosbags raises its own types for unreadable bags
         raise LogFormatError(bag, f"cannot read the bag: {exc}") from None
-    if kind == "joints" and joints is None:
-        raise joints_error or LogFormatError(bag, f"{chosen['wheels']}: no JointState message")
-    if other_joints:
-        notes.append(f"{chosen['wheels']}: {other_joints} messages without the wheel joints {list(joints)} skipped "
-                     "(another publisher on the topic)")
+    if kind == "joints":
+        wheels = _joint_rows(bag, chosen["wheels"], joint_msgs, left_joint, right_joint, notes, not_finite)
     if null_island:
         notes.append(f"{chosen['gps']}: {null_island} fixes at latitude 0, longitude 0 (a receiver's placeholder "
                      "before its first fix) dropped")
@@ -507,7 +547,9 @@ def import_rosbag(bag: Path | str, wheel_topic: str | None = None, left_joint: s
     if fixes:
         f = np.array(fixes)
         tf, lat, lon, sig = _increasing(f[:, 0], f[:, 1], f[:, 2], f[:, 3])
-        _said_equal_stamps(chosen["gps"], len(f), len(tf), notes)
+        if _said_equal_stamps(chosen["gps"], len(f), len(tf), notes, warnings):
+            fixes = []
+    if fixes:
         origin = (float(lat[0]), float(lon[0]))
         x, y = latlon_to_local(lat, lon, *origin)
         known = np.isfinite(sig) & (sig > 0)
@@ -517,9 +559,12 @@ def import_rosbag(bag: Path | str, wheel_topic: str | None = None, left_joint: s
             # One fix's NaN covariance used to drop every fix's sigma (a probe: RTK fixes at 2 cm
             # taken at the 5 cm default, 637 of 1800 rejected). The others' median stands in.
             gps_sigma = float(np.median(sig[known]))
-            gps = Gps(tf, x, y, np.where(known, sig, gps_sigma))
+            # the largest known sigma, at least the default: a fix without one may come from a fallback mode
+            fill = max(float(sig[known].max()), 0.05)
+            gps = Gps(tf, x, y, np.where(known, sig, fill))
             notes.append(f"{chosen['gps']}: {int((~known).sum())} of {known.size} fixes carry no usable covariance "
-                         f"(NaN, zero, or type unknown): they take the others' median sigma, {gps_sigma:.3g} m")
+                         f"(NaN, zero, or type unknown): they take sigma {fill:.3g} m (the largest of the others', "
+                         "at least 0.05 m)")
         else:
             gps = Gps(tf, x, y)
             notes.append(f"{chosen['gps']}: no fix carries a usable covariance: sigma {gps_sigma:g} m assumed "
@@ -538,7 +583,9 @@ def import_rosbag(bag: Path | str, wheel_topic: str | None = None, left_joint: s
     if rates:
         g = np.array(rates)
         tg, wx, wy, wz = _increasing(g[:, 0], g[:, 1], g[:, 2], g[:, 3])
-        _said_equal_stamps(chosen["imu"], len(g), len(tg), notes)
+        if _said_equal_stamps(chosen["imu"], len(g), len(tg), notes, warnings):
+            rates = []
+    if rates:
         mount = next((frames[(p, imu_frame)][1] for p in BASE_FRAMES if (p, imu_frame) in frames), None)
         if imu_axis == "auto" and mount is not None:
             # The robot's yaw rate is the z row of the rotation into base_link.
@@ -560,13 +607,20 @@ def import_rosbag(bag: Path | str, wheel_topic: str | None = None, left_joint: s
                t_origin=(origin_ns or 0) // 1_000_000_000)
 
 
-def _said_equal_stamps(topic, n_in: int, n_out: int, notes: list) -> None:
+def _said_equal_stamps(topic, n_in: int, n_out: int, notes: list, warnings: list | None = None) -> bool:
     """A note when messages shared a stamp with an earlier one (only the
-    first of each stamp is kept): many such mean a coarse clock."""
+    first of each stamp is kept): many such mean a coarse clock. True, with
+    a warning, when every message had one stamp (a driver that never sets
+    its header): the sensor is then left out."""
+    if n_out < 2 <= n_in and warnings is not None:
+        warnings.append(f"{topic}: all {n_in} messages carry the same header stamp: left out (--stamps receive "
+                        "uses the bag's receive times)")
+        return True
     if n_out < n_in:
         notes.append(f"{topic}: {n_in - n_out} of {n_in} messages repeat an earlier stamp and were dropped"
                      + ("; the header stamps look coarse: --stamps receive uses the bag's receive times"
                         if n_out < 0.9 * n_in else ""))
+    return False
 
 
 def _wheel_speeds(bag, topic, kind, rows, wheel_radius, track_width, notes) -> WheelSpeeds:
@@ -626,7 +680,10 @@ def _yaw_axis(axis: str, ws: WheelSpeeds, track: float, t: np.ndarray, rates: di
         return sign * rates[axis[-1]], None
     w = np.interp(t, ws.t, (ws.v_right - ws.v_left) / track)
     inside = (t >= ws.t[0]) & (t <= ws.t[-1])
-    if inside.sum() < 30 or np.std(w[inside]) < MIN_TURN:
+    if inside.sum() < 30:
+        return rates["z"], (f"{topic}: its stamps overlap the wheels' too little to tell the IMU's yaw axis from the "
+                            "data (another clock?): z taken as mounted upright; give --imu-axis (or /tf_static)")
+    if np.std(w[inside]) < MIN_TURN:
         # too little turning to tell the axis (or its sign) from the data
         return rates["z"], (f"{topic}: the run turns too little to tell the IMU's yaw axis from the data: z taken "
                             "as mounted upright; check the mounting, or give --imu-axis (or /tf_static)")
