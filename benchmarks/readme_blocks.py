@@ -1390,8 +1390,25 @@ def outrun_missed(results: Path) -> str:
 
 
 def outrun_table(results: Path) -> str:
-    """benchmarks/README.md: the whole of results/outrun.md but its title."""
-    return (results / "outrun.md").read_text().split("\n", 2)[2].rstrip() + "\n\n" + _source("outrun", _load("outrun", results))
+    """benchmarks/README.md: benchmarks.outrun's three tables. Each cell: the
+    largest run's distance and peak z, the rows' largest position error and
+    z, and the status (**flagged**: by the outrun check)."""
+    d = _load("outrun", results)
+
+    def cell(r):
+        if "stopped" in r:
+            return "stopped"
+        mark = "**flagged**" if r["flagged"] else r["status"]
+        return (f"{r['largest_m']:.3f} m, z {r['largest_z']:.1f}; rows {r['position_error_m']:.2f} m "
+                f"z {r['position_z']:.0f} ({mark})")
+    out = []
+    for group, title in (("clean", "Clean logs"), ("shifted", "Fixes shifted along the path"),
+                         ("missed", "Known misses")):
+        methods = list(next(iter(d[group].values())))
+        out += [f"**{title}**", "", "| log | " + " | ".join(methods) + " |", "|---" * (len(methods) + 1) + "|"]
+        out += [f"| {name} | " + " | ".join(cell(row[m]) for m in methods) + " |" for name, row in d[group].items()]
+        out.append("")
+    return "\n".join(out) + "\n" + _source("outrun", d)
 
 
 BLOCKS = {f.__name__: f for f in (
