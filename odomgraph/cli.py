@@ -448,7 +448,8 @@ def estimate(
                                                                  "per log inside it, and fleet.csv).")],
     method: Annotated[MethodName, typer.Option(help="Estimator.")] = MethodName.ekf,
     calibrate_until: Annotated[str, typer.Option(
-        help="Seconds from the log start to estimate scale factors with slip forced to 0; "
+        help="Seconds from the log start (the wheels' first row when the other sensors ran before them) to "
+             "estimate scale factors with slip forced to 0; "
              "after it the scale factors are held and slip is estimated. 0 = slip only.")] = "20",
     hold: Annotated[HoldName, typer.Option(
         help="consider: hold scale factors with zero gain, keep honest sigma (default); "
@@ -572,7 +573,8 @@ def compare(
     log_dir: Annotated[Path, typer.Argument(metavar="LOG", help="Log directory (LOG_FORMAT.md).")],
     output: Annotated[Path, typer.Option("--output", "-o", help="Report directory to write.")],
     calibrate_until: Annotated[str, typer.Option(
-        help="Seconds from the log start to estimate scale factors with slip forced to 0; "
+        help="Seconds from the log start (the wheels' first row when the other sensors ran before them) to "
+             "estimate scale factors with slip forced to 0; "
              "after it the scale factors are held and slip is estimated. 0 = slip only.")] = "20",
     hold: Annotated[HoldName, typer.Option(help="How the EKF holds the scale factors (see estimate).")]
     = HoldName.consider,
@@ -944,6 +946,18 @@ def import_(
     except LogFormatError as exc:
         raise LogFormatError(source, f"the import would give a log that cannot be used: {exc.path.name}: "
                                      f"{exc.problem}") from None
+    from odomgraph import __version__
+    given = {k: v for k, v in dict(metadata=metadata, fixes_hz=fixes_hz, fix_sigma=fix_sigma,
+                                    ground_truth=ground_truth, wheel_topic=wheel_topic, left_joint=left_joint,
+                                    right_joint=right_joint, wheel_radius=wheel_radius, track_width=track_width,
+                                    gps_topic=gps_topic, imu_topic=imu_topic, imu_axis=imu_axis,
+                                    tick_topics=tick_topics, ticks_per_meter=ticks_per_meter,
+                                    gps_lever_arm=gps_lever_arm, stamps=stamps).items() if v is not None}
+    log = log.with_(provenance={
+        "importer": kind.value, "source": str(source.resolve()), "odomgraph": __version__,
+        "options": {k: (str(v) if isinstance(v, Path) else list(v) if isinstance(v, tuple) else v)
+                    for k, v in given.items()},
+        "notes": list(log.notes), "warnings": [" ".join(str(w).split()) for w in log.warnings]})
     write_log(log, output, inputs)
     _out(f"wrote {output} ({'; '.join(log.notes)})")
     for w in log.warnings:

@@ -831,7 +831,7 @@ class _Smoother:
         self.offset = online._wheel_rows - len(wheel.t)
         # the keyframes of the whole log are every step-th wheel row from `first` on
         self.kf_times = [float(t) for t in wheel.t[self.first::self.step]]
-        self.t_start = min(float(s.t[0]) for s in log.sensors() if len(s.t))
+        self.t_start = log.t_schedule          # the schedule's origin, as the replay's (Log.t_schedule)
         b = math.inf if final else online._final_before(SPIKE_HALF)
         # final: interval j ends at t_{j+1} <= b, and keyframe j+2 is one of the log's
         m = 0

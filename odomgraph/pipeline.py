@@ -205,7 +205,7 @@ def _diverged_in_window(message: str, log: Log, schedule: Schedule) -> bool:
     m = re.search(r"at t=(-?[0-9.]+) s", message)
     if m is None:
         return False            # (not a divergence in time: unphysical scale factors, a mounting mistake)
-    return float(m.group(1)) < log.t_start + schedule.calibrate_until + WINDOW_AFTERMATH
+    return float(m.group(1)) < log.t_schedule + schedule.calibrate_until + WINDOW_AFTERMATH
 
 
 #: What a run again without the calibration window says (_estimate_checked).
@@ -232,7 +232,7 @@ def _with_window_slip(est: Estimate, log: Log, schedule: Schedule, run, method: 
         return est              # (its fixes' times are the corrected ones: compared elsewhere)
     if any(RETRIED in f for f in est.flags):
         return est              # (it ran again without the window, and says so)
-    t0, t_switch = log.t_start, schedule.switch_time(log.t_start)
+    t0, t_switch = log.t_schedule, schedule.switch_time(log.t_schedule)
 
     def found(e):
         return windowfit.stretches(e, log, t0, t_switch, e.noise_scales.get("gps", {}).get("applied", 1.0))
@@ -468,7 +468,7 @@ def _window_warnings(est: Estimate, log: Log, schedule: Schedule) -> list[str]:
     c = schedule.calibrate_until
     if not c:
         return []
-    t_end = log.t_start + c
+    t_end = log.t_schedule + c
     if est.t[0] >= t_end:
         return [f"the calibration window (until t={t_end:.1f} s) ended before the estimator started at "
                 f"t={est.t[0]:.1f} s: nothing was calibrated in it; lengthen --calibrate-until"]
@@ -766,6 +766,8 @@ def summary(est: Estimate, log: Log, schedule: Schedule) -> dict:
         "noise_scales": est.noise_scales,
         "warnings": list(log.warnings) + warnings_of(est, log),
         "notes": est.notes,
+        **({"import": {k: log.provenance.get(k) for k in ("importer", "source", "odomgraph")}}
+           if log.provenance else {}),
     }
     if est.update_times is not None and len(est.update_times) >= 10:
         ut = est.update_times
@@ -1033,6 +1035,8 @@ def calibrate(log: Log, schedule: Schedule = Schedule(calibrate_until=None), met
         report[f"dead_reckoning_{name}"] = {"rms_m": float(np.sqrt(np.mean(e**2))), "final_m": float(e[-1])}
     report["reference"] = "truth" if log.truth is not None else "smoothed estimate"
     report.update(_calibration_checks(log, est, k, sk, method, schedule, options))
+    # what reading the log said (rows read once, an import's warnings: Log.warnings) comes first
+    report["warnings"][:0] = list(log.warnings)
     if gyro is not None:
         report["gyro_scale"] = {n: gyro[n] for n in ("value", "sigma", "determined", "corrected")}
         if gyro["line"]:

@@ -10,6 +10,7 @@ from typer.testing import CliRunner
 
 from odomgraph.analysis.holdout import TRAIN_SHARE, held_out, score_fixes, score_gyro, split_time
 from odomgraph.analysis.mounting import mounting_warnings
+from odomgraph import state as S
 from odomgraph.cli import app
 from odomgraph.errors import CalibrationRejectedError, EstimatorDivergedError
 from odomgraph.estimators.schedule import Schedule
@@ -246,7 +247,7 @@ def test_late_slip_is_not_a_clock_jump_and_the_log_is_written(tmp_path):
         assert rep["scale"][name] == pytest.approx(true, rel=0.005)
 
 
-@pytest.mark.parametrize("shift,hz", [(1.0, 50.0), (-1.5, 20.0), (2.6, 10.0)])
+@pytest.mark.parametrize("shift,hz", [pytest.param(1.0, 50.0, marks=pytest.mark.slow), (-1.5, 20.0), (2.6, 10.0)])
 def test_a_late_gps_that_bends_the_fit_is_still_named(tmp_path, shift, hz):
     """An estimate fitted to late fixes bends its scale factors (1.42 / 0.77
     for 1 s at 50 Hz) and its own path hid the offset: calibrate wrote it
@@ -323,3 +324,33 @@ def test_an_empty_reference_file_leaves_no_split_and_no_traceback(tmp_path):
     g = log.gyro.t
     assert t0 == pytest.approx(g[0] + TRAIN_SHARE * (g[-1] - g[0]), abs=0.1)
     assert split_time(empty.with_(gyro=log.gyro.__class__(np.zeros(0), np.zeros(0)))) is None
+
+
+@pytest.mark.parametrize("which,seed,lead,method", [("paper", 16, 60.0, "ekf"), ("yard", 17, 35.0, "batch"),
+                                                     ("paper", 18, 1.5, "isam2")])
+def test_the_schedule_counts_from_the_wheels_when_references_lead(which, seed, lead, method):
+    """GPS and gyro logging ``lead`` seconds before the wheel driver started
+    (the robot standing): --calibrate-until 20 counted from their first
+    sample, so the window passed with no wheel row in it (a warning said so,
+    and nothing was calibrated). It counts from the wheels' first row now
+    (Log.t_schedule); sensors that start together keep their origin."""
+    from odomgraph.io.log import SCHEDULE_LEAD_S, Gps, Gyro
+    from odomgraph.pipeline import estimate
+    sc, log = _log(which, seed, 90.0)
+    rng = np.random.default_rng(seed)
+    g, p = log.gyro, log.gps
+    tg, tp = np.arange(g.t[0] - lead, g.t[0] - 0.02, 0.04), np.arange(p.t[0] - lead, p.t[0] - 0.1, 0.2)
+    early = log.with_(
+        gyro=Gyro(np.concatenate([tg, g.t]), np.concatenate([0.01 * rng.standard_normal(tg.size), g.omega])),
+        gps=Gps(np.concatenate([tp, p.t]), np.concatenate([p.x[0] + 0.05 * rng.standard_normal(tp.size), p.x]),
+                np.concatenate([p.y[0] + 0.05 * rng.standard_normal(tp.size), p.y])))
+    w0 = float(early.encoders.t[0])
+    assert early.t_schedule == w0 and early.t_start < w0 - SCHEDULE_LEAD_S
+    assert log.t_schedule == log.t_start          # the simulator's sensors start together
+    est = estimate(early, method, Schedule(20.0))
+    assert est.t_switch == pytest.approx(w0 + 20.0)
+    assert not any("calibration window" in w and "ended before" in w for w in est.warnings)
+    truth = np.array(sc.scales[:2])
+    z = (est.mean[-1, S.WHEEL_SCALE_S] - truth) / est.sigma[-1, S.WHEEL_SCALE_S]
+    assert np.all(np.abs(z) < 3.0), z
+    assert np.all(est.sigma[-1, S.WHEEL_SCALE_S] < 0.02)      # calibrated, not the prior's

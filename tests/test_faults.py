@@ -197,3 +197,24 @@ def test_fixes_after_an_outage_are_no_jump(scenario, seed, method):
     err = np.hypot(est.mean[back, 0] - log.truth.at("x", est.t[back]),
                    est.mean[back, 1] - log.truth.at("y", est.t[back]))
     assert np.median(err) < 0.1, np.median(err)
+
+
+def test_wheel_spikes_are_counted_against_wheel_rows():
+    """Encoder spikes are single rows; batch counted them against keyframe
+    intervals ("831 of 92 measurements rejected": a probe's noisy wheel
+    driver) and called the run degraded. 30 spikes in 30 s of 50 Hz wheels at
+    5 Hz keyframes: 30 of about 1500 rows (2 %, 20 % of the intervals)."""
+    from odomgraph.pipeline import estimate, warnings_of
+    from odomgraph.result import status_of
+    from odomgraph.sim.scenarios import yard
+    sc = yard(30.0).with_(slips=())
+    times = np.linspace(3.0, 27.0, 30) + 0.013
+    log = inject(sc, Faults(spikes=tuple(("encoders", float(t), 3.0) for t in times)), 8)
+    est = estimate(log, "batch", keyframe_hz=5.0)
+    e = log.encoders
+    # the rows after the first keyframe (the first row, or the second when a reference starts first)
+    assert abs(est.used["encoders"] - (len(e.t) - 1)) <= 1
+    assert 27 <= est.rejected["encoders"] <= 30
+    assert any(f"encoders: {est.rejected['encoders']} of {est.used['encoders']} measurements" in w
+               for w in warnings_of(est, log))
+    assert not any(r.startswith("encoders:") for r in status_of(est)[1])

@@ -35,7 +35,7 @@ def _gyro_times(log, g):
     return log.with_(gyro=replace(log.gyro, omega=log.gyro.omega * g))
 
 
-@pytest.mark.parametrize("name,seed,g", [("paper", 44, 1.025), ("yard", 45, 0.985), ("paper", 46, 1.0)])
+@pytest.mark.parametrize("name,seed,g", [("paper", 44, 1.025), pytest.param("yard", 45, 0.985, marks=pytest.mark.slow), ("paper", 46, 1.0)])
 def test_calibrate_finds_the_gyro_scale_and_the_true_track(name, seed, g):
     sc = paper(90.0) if name == "paper" else yard(120.0)
     log = _gyro_times(simulate(sc, seed), g)

@@ -78,7 +78,7 @@ def test_calibrate_refuses_a_late_gyro():
     assert float(said[0].split("look ")[1].split(" s late")[0]) == pytest.approx(0.3, abs=0.03)
 
 
-@pytest.mark.parametrize("make, seed, lag", [(paper, 71, 0.15), (yard, 72, 0.25)])
+@pytest.mark.parametrize("make, seed, lag", [(paper, 71, 0.15), pytest.param(yard, 72, 0.25, marks=pytest.mark.slow)])
 def test_both_references_late_alike_name_the_wheels(make, seed, lag, tmp_path):
     """Wheel stamps late (an odometry filter's lag: a hostile probe's
     diff_drive_controller with its 10-sample rolling window) made the GPS and

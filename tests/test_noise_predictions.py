@@ -31,7 +31,7 @@ def _log(sc, seed: int, gps_hz: float, sigma_factor: float = 1.0):
     return log.with_(robot=log.robot.with_(gps_sigma=log.robot.gps_sigma * sigma_factor))
 
 
-@pytest.mark.parametrize("sc, seed, hz", [(yard(120.0), 5, 0.2), (paper(120.0), 4, 0.2)],
+@pytest.mark.parametrize("sc, seed, hz", [pytest.param(yard(120.0), 5, 0.2, marks=pytest.mark.slow), (paper(120.0), 4, 0.2)],
                          ids=["yard-0.2Hz", "paper-0.2Hz"])
 def test_sparse_fixes_widening_is_not_written_back(sc, seed, hz, tmp_path):
     log = _log(sc, seed, hz)

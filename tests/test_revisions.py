@@ -114,7 +114,7 @@ def test_causal_rows_far_outside_sigma_are_flagged():
     assert len(said) == 1 and status_of(est)[0] == "degraded", est.flags
 
 
-@pytest.mark.parametrize("seed,method", [(93, "fixed-lag"), (94, "isam2"), (95, "ekf")])
+@pytest.mark.parametrize("seed,method", [(93, "fixed-lag"), pytest.param(94, "isam2", marks=pytest.mark.slow), (95, "ekf")])
 def test_weak_fixes_with_honest_rows_say_nothing(seed, method):
     from odomgraph.estimators.schedule import Schedule
     from odomgraph.pipeline import estimate

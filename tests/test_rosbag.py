@@ -203,8 +203,8 @@ def test_rosbag_cli(bag, tmp_path):
     assert res.exit_code == 0, res.output
     text = (tmp_path / "log" / "robot.toml").read_text()
     assert "lever_arm = [-0.45, 0.0]" in text and "origin = [41.5045" in text
-    assert sorted(p.name for p in (tmp_path / "log").iterdir() if p.name != ".odomgraph") == ["gps.csv", "gyro.csv", "robot.toml",
-                                                                     "wheel_speeds.csv"]
+    assert sorted(p.name for p in (tmp_path / "log").iterdir() if p.name != ".odomgraph") == ["gps.csv", "gyro.csv", "import.json",
+                                                                     "robot.toml", "wheel_speeds.csv"]
     # the written log holds the bag's numbers
     back = read_log(tmp_path / "log")
     e, r = src.encoders, src.robot
@@ -547,3 +547,21 @@ def test_an_unknown_gps_lever_arm_is_a_warning(tmp_path):
     _write_bag(tmp_path / "nolever", src, wheels="odometry")
     log = import_rosbag(tmp_path / "nolever", track_width=src.robot.track_width)
     assert any("lever arm is unknown" in w and "--gps-lever-arm" in w for w in log.warnings)
+
+
+def test_a_killed_recording_gets_the_reindex_remedy(tmp_path):
+    """A ROS 1 bag cut off before its index was written, and a ROS 2
+    directory without metadata.yaml (a recording that was killed), each
+    gave rosbags' own words only; now the one line names the remedy."""
+    src = simulate(paper(12.0), 23)
+    _write_bag(tmp_path / "r1.bag", src, storage="ros1")
+    data = (tmp_path / "r1.bag").read_bytes()
+    cut = tmp_path / "cut.bag"
+    cut.write_bytes(data[: int(len(data) * 0.55)])
+    with pytest.raises(LogFormatError, match=r"\(a recording that was killed\?\): 'rosbag reindex .*cut.bag' mends it$"):
+        import_rosbag(cut, track_width=0.6, wheel_radius=R_WHEEL)
+    b2 = tmp_path / "r2"
+    _write_bag(b2, src)
+    (b2 / "metadata.yaml").unlink()
+    with pytest.raises(LogFormatError, match=r"no metadata.yaml .*'ros2 bag reindex .*r2' writes it$"):
+        import_rosbag(b2, track_width=0.6, wheel_radius=R_WHEEL)

@@ -258,3 +258,39 @@ def test_a_wide_counter_that_jumps_is_not_taken_for_a_wrap(tmp_path):
     out = _unwrap_counts(wide, None, notes, "t")
     np.testing.assert_array_equal(out, np.arange(0, 20 * 2**28, 2**28))
     assert notes == ["t: the counter wraps at 32 bits inside its 64-bit message: unwrapped"]
+
+
+def test_the_import_s_warnings_stay_with_the_log(sim, tmp_path):
+    """An import's warnings were printed once and lost: estimate and
+    calibrate, run later on the log, trusted an IMU the import had left out
+    without a word. import.json keeps where the log came from and what the
+    import said; every estimate's summary and every calibration repeats the
+    warnings."""
+    import json
+    from typer.testing import CliRunner
+    from odomgraph.cli import app
+    from odomgraph.io.log import read_log
+    bag = _bag(tmp_path / "orient", sim, imu_cov=-1.0)
+    run = CliRunner().invoke
+    res = run(app, ["import", "rosbag", str(bag), "--wheel-radius", str(R_WHEEL), "--track-width", "0.6",
+                    "-o", str(tmp_path / "log")])
+    assert res.exit_code == 0, res.output
+    prov = json.loads((tmp_path / "log" / "import.json").read_text())
+    assert prov["importer"] == "rosbag" and prov["source"] == str(bag.resolve())
+    assert prov["options"]["track_width"] == 0.6 and prov["options"]["wheel_radius"] == R_WHEEL
+    assert len(prov["warnings"]) == 2 and "REP 145" in prov["warnings"][0] and "--gps-lever-arm" in prov["warnings"][1]
+    assert prov["notes"][:4] == ["imported from bag orient", "wheels: picked /joint_states", "imu: picked /imu",
+                                 "gps: picked /fix"]
+    log = read_log(tmp_path / "log")
+    assert log.warnings == tuple(f"import: {w}" for w in prov["warnings"]) and log.provenance == prov
+    res = run(app, ["estimate", str(tmp_path / "log"), "--method", "ekf", "-o", str(tmp_path / "est")])
+    assert res.exit_code == 0, res.output
+    summary = json.loads((tmp_path / "est" / "summary.json").read_text())
+    assert summary["warnings"][:2] == [f"import: {w}" for w in prov["warnings"]]
+    assert summary["import"] == {"importer": "rosbag", "source": str(bag.resolve()), "odomgraph": prov["odomgraph"]}
+    from odomgraph.pipeline import calibrate
+    _, report = calibrate(log)
+    assert report["warnings"][:2] == [f"import: {w}" for w in prov["warnings"]]
+    # a damaged record is ignored, said
+    (tmp_path / "log" / "import.json").write_text("[1, 2]")
+    assert read_log(tmp_path / "log").warnings == ("import.json: not an import record (not a JSON object); ignored",)

@@ -51,7 +51,7 @@ def test_a_slip_through_the_window_is_right_or_flagged(case, method):
         assert t0 >= slip.end - 1.0            # the skid is after the slip ends, where the wheel grips again
 
 
-@pytest.mark.parametrize("make,seed", [(paper, 43), (yard, 44)])
+@pytest.mark.parametrize("make,seed", [(paper, 43), pytest.param(yard, 44, marks=pytest.mark.slow)])
 def test_a_clean_log_and_its_slip_events_are_not_taken_for_a_skid(make, seed):
     """The scenarios' own slip events (0.3-0.5 m/s for 8-10 s, after the
     window) and a clean calibration: no skid said, by any estimator."""

@@ -91,7 +91,7 @@ def test_its_rows_have_the_gradient_of_its_cost_on_slip_and_scale(slipping_probl
             assert grad == pytest.approx((cp - cm) / 2e-7, rel=1e-4, abs=1e-5)
 
 
-@pytest.mark.parametrize("seed, duration, sigma, hz", [(91, 150.0, 10.0, 0.2), (92, 120.0, 2.0, 1.0)])
+@pytest.mark.parametrize("seed, duration, sigma, hz", [pytest.param(91, 150.0, 10.0, 0.2, marks=pytest.mark.slow), (92, 120.0, 2.0, 1.0)])
 def test_weak_fixes_leave_ticks_per_metre_within_sigma(seed, duration, sigma, hz):
     log, truth = _weak_log(seed, duration, sigma, hz)
     z = {}

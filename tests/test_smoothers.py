@@ -312,7 +312,7 @@ def test_wheel_speed_units_shrink_the_poor_gps_scale_bias():
     np.testing.assert_array_equal(a.mean, b.mean)
 
 
-@pytest.mark.parametrize("make,seed", [(paper, 21), ("yard", 22)])
+@pytest.mark.parametrize("make,seed", [(paper, 21), pytest.param("yard", 22, marks=pytest.mark.slow)])
 @pytest.mark.parametrize("runner", [run_isam2, run_fixed_lag])
 def test_incremental_wheel_speed_units_remove_the_weak_gps_shrinkage(make, seed, runner):
     """0.5 m GPS at 2 Hz: with the plain walks isam2 and fixed-lag put ticks/m

@@ -179,7 +179,7 @@ def test_batch_only_options_are_refused_by_the_incremental_smoothers(option, val
             estimate(log, method, Schedule(20.0), **{option: value})
 
 
-@pytest.mark.parametrize("seed", [52, 61])
+@pytest.mark.parametrize("seed", [52, pytest.param(61, marks=pytest.mark.slow)])
 def test_without_a_gyro_batch_keeps_gaussian_slip_steps(seed):
     """A yard log without a gyro (GPS 5 Hz), one wheel slipping at a time
     (right +0.5 m/s over 60-63 s, left +0.8 over 100-102 s). A second read

@@ -189,7 +189,7 @@ def test_time_offset_found_leaves_no_false_slip_in_the_window():
     assert not any("calibration window" in w for w in est.warnings), est.warnings
 
 
-@pytest.mark.parametrize("name,seed,late", [("yard", 3, 2.0), ("paper", 34, -1.5)])
+@pytest.mark.parametrize("name,seed,late", [pytest.param("yard", 3, 2.0, marks=pytest.mark.slow), ("paper", 34, -1.5)])
 def test_an_ekf_that_stops_on_a_late_gps_names_the_clock(name, seed, late):
     """Without --time-offset, fixes 1.5-2 s off stop the EKF (their NIS runs
     away). It used to stop with the NIS alone, where batch ran and named the

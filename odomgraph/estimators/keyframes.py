@@ -304,12 +304,18 @@ def build_keyframes(log: Log, t_start: float, keyframe_hz: float, causal: bool =
         if idx[-1] != len(w.t) - 1:
             idx = np.append(idx, len(w.t) - 1)
         t = w.t[idx]
-        k, inside = bin_times(t, w.t)
+        # The speeds are instants (LOG_FORMAT), the keyframes sit on samples:
+        # each interval's mean speed is the trapezoid over its samples, both
+        # ends included (interval_means with q = 0). The mean of the samples
+        # in [t_k, t_{k+1}) was a left Riemann sum, half a sample period late:
+        # while the robot accelerated the wheels lagged the gyro and the
+        # fixes, and a 5 s drive's scale factors came out 1-3 % low at z 3-5
+        # (a probe's short bags; tests/test_wheel_speed_means.py).
         ms = np.stack([w.v_left, w.v_right], -1)
-        n = np.bincount(k[inside], minlength=len(t) - 1).astype(float)
-        tot = np.stack([np.bincount(k[inside], ms[inside, j], minlength=len(t) - 1) for j in range(2)], -1)
-        m = tot / np.maximum(n, 1)[:, None]
-        sigma = speed_sigma(m, a, b) / np.sqrt(np.maximum(n, 1))[:, None]
+        m, unit, _ = interval_means(t, w.t, ms, 1.0, 0.0, causal)
+        # eq. 41 at the interval's mean speed, through the trapezoid's weights
+        # (sqrt(sum w_i^2) / dt, about 1 / sqrt(n) for n samples)
+        sigma = speed_sigma(m, a, b) * unit
         # An interval that spans a pause in the log (no sample for longer than
         # PAUSE_S) has no speed measured over it: its one sample is an
         # instant, not its average (a day's pause after a sample of 0.5 m/s

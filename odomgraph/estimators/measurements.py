@@ -34,6 +34,7 @@ class WheelMeas:
 @dataclass(frozen=True)
 class Measurements:
     t_start: float
+    """The schedule's origin [s] (Log.t_schedule): the calibration window counts from it."""
     wheel: WheelMeas
     gyro: tuple[np.ndarray, np.ndarray] | None = None
     """(t, omega [rad/s])."""
@@ -127,7 +128,7 @@ def from_log(log: Log, frozen: bool = True) -> Measurements:
     if log.velocity is not None and len(log.velocity.t):
         vel = (log.velocity.t, np.stack([log.velocity.v, log.velocity.omega], -1))
     rid = None if ranges is None else np.asarray(log.ranges.beacon)
-    return Measurements(log.t_start, wheel, gyro, gps, ranges, vel, tuple(notes), rid, spikes)
+    return Measurements(log.t_schedule, wheel, gyro, gps, ranges, vel, tuple(notes), rid, spikes)
 
 
 def coverage(sensor, t: np.ndarray, reach: float = 0.5) -> float:

@@ -1,6 +1,8 @@
 """The pseudo-update schedule of the paper (sec. III-D and IV).
 
-Before ``calibrate_until`` seconds (from the log's first sample) the slips are
+Before ``calibrate_until`` seconds (from the log's first sample, or the
+wheels' first row when the other sensors ran well before them:
+io.log.Log.t_schedule) the slips are
 forced to zero and the scale factors are estimated; after it the scale factors
 are held and the slips are estimated. ``calibrate_until = 0`` is slip-only.
 ``None`` applies neither (only the smoother offers that; see LOG_FORMAT).
@@ -27,7 +29,7 @@ class Hold(str, Enum):
 @dataclass(frozen=True)
 class Schedule:
     calibrate_until: float | None = 20.0
-    """Seconds after the log's first sample; 0 = slip only; None = no schedule."""
+    """Seconds after the schedule's origin (Log.t_schedule); 0 = slip only; None = no schedule."""
     hold: Hold = Hold.consider
     slipping: tuple[tuple[float, float], ...] = ()
     """(start, end) [s, the log's clock] stretches of the calibration window

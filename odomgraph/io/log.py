@@ -6,6 +6,7 @@ raises ``LogFormatError`` naming file, line and problem.
 """
 from __future__ import annotations
 
+import json
 import tomllib
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -201,7 +202,11 @@ class Log:
     path: Path | None = None
     notes: tuple[str, ...] = field(default=())
     warnings: tuple[str, ...] = field(default=())
-    """What reading the files repaired (duplicated rows dropped), one line each."""
+    """What reading the files repaired (duplicated rows dropped), and what
+    the import that wrote them warned of (IMPORT_FILE), one line each."""
+    provenance: dict | None = None
+    """Where an imported log came from (IMPORT_FILE's content: importer,
+    source, options, notes, warnings, odomgraph version); None otherwise."""
     t_origin: int = 0
     """Every ``t`` counts seconds from this integer second of the log's clock.
     0 for logs on a small clock; a log on a real clock (stamps near 1.7e9 s,
@@ -212,6 +217,20 @@ class Log:
     @property
     def t_start(self) -> float:
         return float(min(s.t[0] for s in self.sensors() if len(s.t)))
+
+    @property
+    def t_schedule(self) -> float:
+        """When the pseudo-update schedule's clock starts [s]: Schedule's
+        ``calibrate_until`` counts from here. The first sample of any sensor,
+        or the wheels' first row when the others ran more than
+        SCHEDULE_LEAD_S before them: a GPS receiver or an IMU logging while
+        the wheel driver had not started yet (a probe's bag: 150 s) let the
+        calibration window pass with no wheel row in it."""
+        t0 = self.t_start
+        wheel = self.encoders if self.encoders is not None else self.wheel_speeds
+        if wheel is None or not len(wheel.t) or float(wheel.t[0]) - t0 <= SCHEDULE_LEAD_S:
+            return t0
+        return float(wheel.t[0])
 
     @property
     def t_end(self) -> float:
@@ -234,6 +253,40 @@ class Log:
             kw = {k: (v[keep] if isinstance(v, np.ndarray) else v) for k, v in obj.__dict__.items()}
             return type(obj)(**kw)
         return replace(self, **{k: cut(getattr(self, k)) for k in (*SENSOR_FILE, "truth")})
+
+
+IMPORT_FILE = "import.json"
+"""Written by ``odomgraph import`` beside the sensor files (LOG_FORMAT.md
+allows extra files): where the log came from and what the import noted and
+warned of. Its warnings are read back into Log.warnings, so that every
+estimate and calibration of the log repeats them: a fix sigma the import
+assumed, an IMU it left out, are facts about the data the result rests on."""
+
+
+def _provenance(path: Path) -> tuple[dict | None, tuple[str, ...]]:
+    """IMPORT_FILE's content and the warnings it carries (each prefixed
+    "import: "); a file that is not what import writes is ignored with a
+    warning, not refused: it is not a sensor file and nothing needs it."""
+    if not (p := _optional(path)):
+        return None, ()
+    try:
+        prov = json.loads(read_text(p))
+        if not isinstance(prov, dict):
+            raise ValueError("not a JSON object")
+        warns = prov.get("warnings", [])
+        if not isinstance(warns, list) or not all(isinstance(w, str) for w in warns):
+            raise ValueError("'warnings' is not a list of strings")
+    except (ValueError, LogFormatError) as exc:
+        why = exc.problem if isinstance(exc, LogFormatError) else str(exc)
+        return None, (f"{p.name}: not an import record ({shown(why, 80)}); ignored",)
+    return prov, tuple(f"import: {w}" for w in warns)
+
+
+#: Sensors that start up to this long [s] before the wheels leave the
+#: schedule's origin at the first sample (Log.t_schedule): sensors started
+#: together start a fraction of a period apart, and the simulator's logs
+#: and every recording shipped keep their schedule.
+SCHEDULE_LEAD_S = 1.0
 
 
 def _optional(path: Path):
@@ -298,8 +351,9 @@ def read_log(directory: Path | str) -> Log:
             raise LogFormatError(p, f"scale factors must be positive finite numbers, got {list(scales)}")
     warn = tuple(f"{name}: {int(n)} row(s) written twice (same stamp and values) were read once"
                  for name, n in dups.items() if n)
-    log = Log(robot, **read, truth=truth, truth_scales=scales, path=d, warnings=warn,
-              t_origin=origin[0] if origin else 0)
+    prov, prov_warn = _provenance(d / IMPORT_FILE)
+    log = Log(robot, **read, truth=truth, truth_scales=scales, path=d, warnings=prov_warn + warn,
+              provenance=prov, t_origin=origin[0] if origin else 0)
     check_log(log)
     return log
 
@@ -579,6 +633,8 @@ def write_log(log: Log, directory: Path | str, inputs=()) -> Path:
             write_table(d / sf.file, cols, fmts)
         if log.truth is not None:
             write_table(d / "truth.csv", {"t": T(log.truth.t), **log.truth.values}, {"t": "%.6f"})
+        if log.provenance is not None:
+            (d / IMPORT_FILE).write_text(json.dumps(log.provenance, indent=2) + "\n", encoding="utf-8")
         if log.truth_scales is not None:
             sl, sr, sb = log.truth_scales
             (d / "truth.toml").write_text(f"scale_left = {float(sl)!r}\nscale_right = {float(sr)!r}\n"

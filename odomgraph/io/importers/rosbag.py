@@ -104,6 +104,20 @@ def _reader(bag: Path):
             shutil.rmtree(tmp, ignore_errors=True)
 
 
+def _unreadable(bag: Path, exc: Exception) -> LogFormatError:
+    """rosbags' error for a bag it cannot read, in one line, with the
+    remedy when it is a recording that was killed: a ROS 1 bag cut off
+    before its index was written, a ROS 2 directory without metadata.yaml."""
+    text = " ".join(str(exc).split())
+    if bag.is_dir() and not (bag / "metadata.yaml").exists():
+        return LogFormatError(bag, f"cannot read the bag: no metadata.yaml (a recording that was killed?): "
+                                   f"'ros2 bag reindex {bag}' writes it")
+    if bag.is_file() and "index" in text.lower():
+        return LogFormatError(bag, f"cannot read the bag: {text} (a recording that was killed?): "
+                                   f"'rosbag reindex {bag}' mends it")
+    return LogFormatError(bag, f"cannot read the bag: {text}")
+
+
 def _stamp_ns(msg) -> int:
     """The header stamp in integer nanoseconds (exact; a float of 1.7e18 ns is not)."""
     return int(msg.header.stamp.sec) * 1_000_000_000 + int(msg.header.stamp.nanosec)
@@ -262,7 +276,7 @@ def list_topics(bag: Path | str) -> tuple[list[Topic], list[str]]:
     except LogFormatError:
         raise
     except Exception as exc:  # rosbags raises its own types for unreadable bags
-        raise LogFormatError(bag, f"cannot read the bag: {exc}") from None
+        raise _unreadable(bag, exc) from None
     return topics, [f"{p} -> {c} ({x:+.3f}, {y:+.3f}, {z:+.3f}) m" for (p, c), ((x, y, z), _) in sorted(frames.items())]
 
 
@@ -510,7 +524,7 @@ def import_rosbag(bag: Path | str, wheel_topic: str | None = None, left_joint: s
     except LogFormatError:
         raise
     except Exception as exc:  # rosbags raises its own types for unreadable bags
-        raise LogFormatError(bag, f"cannot read the bag: {exc}") from None
+        raise _unreadable(bag, exc) from None
     if kind == "joints":
         wheels = _joint_rows(bag, chosen["wheels"], joint_msgs, left_joint, right_joint, notes, not_finite)
     if null_island:
@@ -635,16 +649,18 @@ def _wheel_speeds(bag, topic, kind, rows, wheel_radius, track_width, notes) -> W
     if kind != "joints":
         v, om = a, b
         return WheelSpeeds(t, v - 0.5 * track_width * om, v + 0.5 * track_width * om)
-    still = np.ptp(a) == 0 and np.ptp(b) == 0 if np.all(np.isfinite(a)) and np.all(np.isfinite(b)) else False
-    if still and np.all(np.isfinite(vl)) and np.all(np.isfinite(vr)) and np.any(vl) | np.any(vr):
+    positions = bool(np.all(np.isfinite(a)) and np.all(np.isfinite(b)))
+    velocities = bool(np.all(np.isfinite(vl)) and np.all(np.isfinite(vr)))
+    if positions and velocities and np.ptp(a) == 0 and np.ptp(b) == 0 and (np.any(vl) or np.any(vr)):
         # positions that never change beside velocities that do: a placeholder, not a robot at rest
         notes.append(f"{topic}: the wheel positions never change while the velocities do: velocities used")
         return WheelSpeeds(t, vl * wheel_radius, vr * wheel_radius)
-    if np.all(np.isfinite(a)) and np.all(np.isfinite(b)):
+    if positions:
+        # each interval's mean speed, stamped at its midpoint: an instant to second order (LOG_FORMAT)
         a, b = (_unwrap_angle(x, topic, side, notes) for x, side in ((a, "left"), (b, "right")))
         dt = np.diff(t)
         return WheelSpeeds(0.5 * (t[1:] + t[:-1]), np.diff(a) * wheel_radius / dt, np.diff(b) * wheel_radius / dt)
-    if np.all(np.isfinite(vl)) and np.all(np.isfinite(vr)):
+    if velocities:
         return WheelSpeeds(t, vl * wheel_radius, vr * wheel_radius)
     raise LogFormatError(bag, f"{topic}: JointState has neither positions nor velocities for the wheels")
 
