@@ -747,7 +747,8 @@ def stream(
         help="Estimator: ekf (a row per encoder row), isam2 (its causal row per keyframe, as online.csv), "
              "fixed-lag (a row per keyframe as it leaves the lag window).")] = MethodName.ekf,
     calibrate_until: Annotated[str, typer.Option(
-        help="Seconds from the first measurement to estimate scale factors with slip forced to 0 (as estimate).")]
+        help="Seconds from the first measurement (the wheels' first when the others ran before them) to "
+             "estimate scale factors with slip forced to 0 (as estimate).")]
     = "20",
     hold: Annotated[HoldName, typer.Option(help="How the scale factors are held after calibration (as estimate).")]
     = HoldName.consider,
@@ -947,16 +948,17 @@ def import_(
         raise LogFormatError(source, f"the import would give a log that cannot be used: {exc.path.name}: "
                                      f"{exc.problem}") from None
     from odomgraph import __version__
-    given = {k: v for k, v in dict(metadata=metadata, fixes_hz=fixes_hz, fix_sigma=fix_sigma,
-                                    ground_truth=ground_truth, wheel_topic=wheel_topic, left_joint=left_joint,
-                                    right_joint=right_joint, wheel_radius=wheel_radius, track_width=track_width,
-                                    gps_topic=gps_topic, imu_topic=imu_topic, imu_axis=imu_axis,
-                                    tick_topics=tick_topics, ticks_per_meter=ticks_per_meter,
-                                    gps_lever_arm=gps_lever_arm, stamps=stamps).items() if v is not None}
+    # the importer's own options (given or default), as it ran
+    own = (dict(metadata=metadata, fixes_hz=fixes_hz, fix_sigma=fix_sigma) if kind is ImportKind.optiodom
+           else dict(ground_truth=ground_truth) if kind is ImportKind.librsf
+           else dict(wheel_topic=wheel_topic, left_joint=left_joint, right_joint=right_joint,
+                     wheel_radius=wheel_radius, track_width=track_width, gps_topic=gps_topic, imu_topic=imu_topic,
+                     imu_axis=imu_axis, tick_topics=tick_topics, ticks_per_meter=ticks_per_meter,
+                     gps_lever_arm=gps_lever_arm, stamps=stamps))
     log = log.with_(provenance={
         "importer": kind.value, "source": str(source.resolve()), "odomgraph": __version__,
-        "options": {k: (str(v) if isinstance(v, Path) else list(v) if isinstance(v, tuple) else v)
-                    for k, v in given.items()},
+        "options": {k: (str(v.resolve()) if isinstance(v, Path) else list(v) if isinstance(v, tuple) else v)
+                    for k, v in own.items() if v is not None},
         "notes": list(log.notes), "warnings": [" ".join(str(w).split()) for w in log.warnings]})
     write_log(log, output, inputs)
     _out(f"wrote {output} ({'; '.join(log.notes)})")

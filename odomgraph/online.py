@@ -64,7 +64,7 @@ from odomgraph.estimators.schedule import Schedule
 from odomgraph.estimators.sensors import DOF, SENSOR_NAMES, WHEEL, event_stream
 from odomgraph.estimators.slipcheck import in_stretches
 from odomgraph.io.csvtable import ORIGIN_ABOVE, ORIGIN_BELOW, split_stamps
-from odomgraph.io.log import SENSOR_FILE, SENSOR_FILES, Gps, Log, Ranges
+from odomgraph.io.log import SCHEDULE_LEAD_S, SENSOR_FILE, SENSOR_FILES, Gps, Log, Ranges
 from odomgraph.io.stream import SENSOR_COLUMNS
 from odomgraph.io.robot import RobotConfig
 
@@ -574,7 +574,13 @@ class Online:
                 firsts = [rows[0][0] for name in ("gps", "ranges") if (rows := self._raw[name])]
                 if firsts:
                     self.warmup = max(self.warmup, min(firsts) - self.t_first + CONSENSUS_WINDOW + WARMUP_MARGIN)
-            if not final and self.t_released < self.t_first + self.warmup:
+            # the warm-up covers the calibration window, which counts from the
+            # schedule's origin (Log.t_schedule): with references that ran
+            # before the wheels, from the wheels' first row (a second read: the
+            # stream started before the replay's window ended, and missed the
+            # slip inside it that the replay found)
+            origin = self._schedule_origin()
+            if not final and (origin is None or self.t_released < origin + self.warmup):
                 return []
             self._start(final)
         if final:
@@ -639,6 +645,16 @@ class Online:
         if self.final is not None:
             out += [f for f in self.final.flags if f not in out]
         return out
+
+    def _schedule_origin(self) -> float | None:
+        """The schedule's origin as the stream knows it (Log.t_schedule on
+        the rows so far): the first row of any sensor, or the wheels' first
+        when it came over SCHEDULE_LEAD_S later; None before a wheel row."""
+        firsts = [rows[0][0] for name in ("encoders", "wheel_speeds") if (rows := self._raw[name])]
+        if not firsts or self.t_first is None:
+            return None
+        w0 = min(firsts)
+        return w0 if w0 - self.t_first > SCHEDULE_LEAD_S else self.t_first
 
     def _start(self, final: bool = False) -> None:
         """Warm-up done: the whole-log decisions on the rows so far (see the module doc)."""

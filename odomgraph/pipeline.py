@@ -766,7 +766,7 @@ def summary(est: Estimate, log: Log, schedule: Schedule) -> dict:
         "noise_scales": est.noise_scales,
         "warnings": list(log.warnings) + warnings_of(est, log),
         "notes": est.notes,
-        **({"import": {k: log.provenance.get(k) for k in ("importer", "source", "odomgraph")}}
+        **({"import": {k: log.provenance[k] for k in ("importer", "source", "odomgraph") if k in log.provenance}}
            if log.provenance else {}),
     }
     if est.update_times is not None and len(est.update_times) >= 10:

@@ -483,3 +483,42 @@ def test_a_stream_says_when_isam2_closes_its_first_segment_unsettled():
     assert said == [w for w in est.warnings if "still uncertain" in w] and len(said) == 1
     assert said[0] in live.summary()["warnings"]
     _assert_rows_equal(rows, est.online)
+
+
+def _leading(log, lead, seed):
+    """``log`` with GPS and gyro rows for ``lead`` seconds before its first
+    (the robot standing, the wheel driver not started yet)."""
+    from odomgraph.io.log import Gps, Gyro
+    rng = np.random.default_rng(seed)
+    g, p = log.gyro, log.gps
+    tg, tp = np.arange(g.t[0] - lead, g.t[0] - 0.02, 0.04), np.arange(p.t[0] - lead, p.t[0] - 0.1, 0.2)
+    return log.with_(
+        truth=None,
+        gyro=Gyro(np.concatenate([tg, g.t]), np.concatenate([0.01 * rng.standard_normal(tg.size), g.omega])),
+        gps=Gps(np.concatenate([tp, p.t]), np.concatenate([p.x[0] + 0.05 * rng.standard_normal(tp.size), p.x]),
+                np.concatenate([p.y[0] + 0.05 * rng.standard_normal(tp.size), p.y])))
+
+
+@pytest.mark.parametrize("method", ["ekf", "fixed-lag"])
+def test_references_that_lead_the_wheels_stream_as_their_replay(method):
+    """GPS and gyro 20 s before the wheels, a slip inside the calibration
+    window (which counts from the wheels' first row: Log.t_schedule). The
+    stream's warm-up counted from the first row of any sensor and started
+    before the window ended: it forced zero slip across the slip the replay
+    found (a second read). Rows, the slip stretches and the counts equal the
+    replay's."""
+    from odomgraph.sim.scenarios import SlipEvent
+    log = _leading(simulate(paper(50.0).with_(slips=(SlipEvent("right", 16.0, 19.0, 0.35),)), 19), 20.0, 19)
+    sch = Schedule(calibrate_until=20.0)
+    est = estimate(log, method, sch)
+    assert est.t_switch == pytest.approx(float(log.encoders.t[0]) + 20.0)
+    live, rows = _stream(log, sch, method=method)
+    _assert_rows_equal(rows, est)
+    from odomgraph.estimators.ekf import EKF
+    init = live.ekf.init if method == "ekf" else live.smoother.runner.prob.init
+    # the slip the window held was found, as the replay's filter finds it
+    assert init.slipping and init.slipping == EKF(log, sch).init.slipping
+    assert init.slipping[0][0] < 18.5 and init.slipping[0][1] > 15.0
+    if method == "fixed-lag":
+        assert live.final.used == est.used and live.final.rejected == est.rejected
+        assert abs(est.used["encoders"] - (len(log.encoders.t) - 1)) <= 2     # rows, not intervals (from init.t on)

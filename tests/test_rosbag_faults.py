@@ -294,3 +294,6 @@ def test_the_import_s_warnings_stay_with_the_log(sim, tmp_path):
     # a damaged record is ignored, said
     (tmp_path / "log" / "import.json").write_text("[1, 2]")
     assert read_log(tmp_path / "log").warnings == ("import.json: not an import record (not a JSON object); ignored",)
+    (tmp_path / "log" / "import.json").unlink()
+    (tmp_path / "log" / "import.json").mkdir()
+    assert read_log(tmp_path / "log").warnings == ("import.json: not an import record (is not a file); ignored",)

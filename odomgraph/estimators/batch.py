@@ -778,15 +778,15 @@ def window_warnings(prob: Problem, schedule: Schedule) -> list[str]:
 
 def measurement_counts(prob: Problem) -> dict[str, int]:
     """Measurements per sensor the smoother used, as the log's rows (the
-    wheel rows and gyro/velocity samples inside the keyframes' span, though
+    wheel rows and gyro/velocity samples in the keyframes' intervals, though
     the graph takes them as interval means): the units of ``rejected``, whose
     wheel rejections are single-row spikes (measurements.despike). Counted
     in keyframe intervals they read "831 of 92 measurements rejected" and
-    made a run degraded (a probe's bag with a noisy wheel driver)."""
+    made a run degraded (a probe's bag with a noisy wheel driver). From the
+    keyframes, so that a stream (estimators.growing) counts as its replay."""
     kf = prob.kf
-    wt = prob.meas.wheel.t if prob.meas is not None else np.empty(0)
-    wheel = int(np.count_nonzero((wt > kf.t[0]) & (wt <= kf.t[-1])))
-    out = {"encoders": max(wheel, kf.n - 1), "gyro": int(np.sum(kf.gyro_n)), "velocity": int(np.sum(kf.vel_n)),
+    wheel = int(np.sum(kf.enc_n)) if kf.enc_n is not None else kf.n - 1
+    out = {"encoders": wheel, "gyro": int(np.sum(kf.gyro_n)), "velocity": int(np.sum(kf.vel_n)),
            "gps": int(kf.gps_k.size), "ranges": int(kf.rng_k.size)}
     return {k: v for k, v in out.items() if v}
 

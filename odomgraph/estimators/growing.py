@@ -31,7 +31,7 @@ WINDOW_BACK = 3
 
 #: Keyframes fields by what they have one row of.
 _PER_KEYFRAME = ("t",)
-_PER_INTERVAL = ("enc_m", "enc_sigma", "gyro_z", "gyro_sigma", "gyro_n", "vel_z", "vel_sigma", "vel_n", "mid_tau_vw", "trans_bend",
+_PER_INTERVAL = ("enc_m", "enc_sigma", "enc_n", "gyro_z", "gyro_sigma", "gyro_n", "vel_z", "vel_sigma", "vel_n", "mid_tau_vw", "trans_bend",
                  "mid_bend")
 _PER_FIX = ("gps_k", "gps_tau_vw", "gps_xy", "gps_sigma", "gps_t", "gps_bend")
 _PER_RANGE = ("rng_k", "rng_tau_vw", "rng_beacon", "rng_z", "rng_id", "rng_bend")

@@ -87,6 +87,9 @@ class Keyframes:
     rng_bend: np.ndarray | None = None
     gps_t: np.ndarray | None = None
     """(G,) time of each fix [s]."""
+    enc_n: np.ndarray | None = None
+    """(N-1,) wheel rows (encoders.csv or wheel_speeds.csv) in each interval
+    (t_k, t_{k+1}]: the rows the smoothers count as used (batch.measurement_counts)."""
 
     @cached_property
     def dt(self) -> np.ndarray:
@@ -312,10 +315,12 @@ def build_keyframes(log: Log, t_start: float, keyframe_hz: float, causal: bool =
         # fixes, and a 5 s drive's scale factors came out 1-3 % low at z 3-5
         # (a probe's short bags; tests/test_wheel_speed_means.py).
         ms = np.stack([w.v_left, w.v_right], -1)
-        m, unit, _ = interval_means(t, w.t, ms, 1.0, 0.0, causal)
-        # eq. 41 at the interval's mean speed, through the trapezoid's weights
-        # (sqrt(sum w_i^2) / dt, about 1 / sqrt(n) for n samples)
-        sigma = speed_sigma(m, a, b) * unit
+        m = interval_means(t, w.t, ms, 0.0, 0.0, causal)[0]
+        # eq. 41 at the interval's mean speed over its n rows: each row counts
+        # in one interval (the trapezoid shares its end rows with the
+        # neighbours, and its weights' sqrt(sum w^2) / dt counted them twice:
+        # 29 % too confident at one row per interval, a second read)
+        sigma = speed_sigma(m, a, b) / np.sqrt(np.diff(idx))[:, None]
         # An interval that spans a pause in the log (no sample for longer than
         # PAUSE_S) has no speed measured over it: its one sample is an
         # instant, not its average (a day's pause after a sample of 0.5 m/s
@@ -395,7 +400,8 @@ def build_keyframes(log: Log, t_start: float, keyframe_hz: float, causal: bool =
         rbd = bent(rk, rg.t[inside], rvw)
         rb = np.asarray([[bc.x, bc.y] for bc in r.beacons])[rg.beacon[inside]]
         rid = rg.beacon[inside]
-    return Keyframes(t=t, enc_m=m, enc_sigma=sigma, gyro_z=gyro_z, gyro_sigma=gyro_sd, gyro_n=np.asarray(gyro_n),
+    return Keyframes(t=t, enc_m=m, enc_sigma=sigma, enc_n=np.diff(idx), gyro_z=gyro_z, gyro_sigma=gyro_sd,
+                     gyro_n=np.asarray(gyro_n),
                      vel_z=vel_z, vel_sigma=vel_sd, vel_n=np.asarray(vel_n), gps_k=gk.astype(int), gps_tau_vw=gvw,
                      gps_xy=gxy, gps_sigma=gs, gps_t=gt, rng_k=rk.astype(int), rng_tau_vw=rvw, rng_beacon=rb, rng_z=rz,
                      rng_id=np.asarray(rid, int), mid_tau_vw=mid_tau,

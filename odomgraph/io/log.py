@@ -267,16 +267,17 @@ def _provenance(path: Path) -> tuple[dict | None, tuple[str, ...]]:
     """IMPORT_FILE's content and the warnings it carries (each prefixed
     "import: "); a file that is not what import writes is ignored with a
     warning, not refused: it is not a sensor file and nothing needs it."""
-    if not (p := _optional(path)):
-        return None, ()
+    p = path
     try:
+        if not _optional(path):
+            return None, ()
         prov = json.loads(read_text(p))
         if not isinstance(prov, dict):
             raise ValueError("not a JSON object")
         warns = prov.get("warnings", [])
         if not isinstance(warns, list) or not all(isinstance(w, str) for w in warns):
             raise ValueError("'warnings' is not a list of strings")
-    except (ValueError, LogFormatError) as exc:
+    except (ValueError, RecursionError, LogFormatError) as exc:
         why = exc.problem if isinstance(exc, LogFormatError) else str(exc)
         return None, (f"{p.name}: not an import record ({shown(why, 80)}); ignored",)
     return prov, tuple(f"import: {w}" for w in warns)

@@ -109,10 +109,12 @@ def _unreadable(bag: Path, exc: Exception) -> LogFormatError:
     remedy when it is a recording that was killed: a ROS 1 bag cut off
     before its index was written, a ROS 2 directory without metadata.yaml."""
     text = " ".join(str(exc).split())
-    if bag.is_dir() and not (bag / "metadata.yaml").exists():
+    storage = [f for f in bag.iterdir() if f.suffix in (".db3", ".mcap")] if bag.is_dir() else []
+    if storage and not (bag / "metadata.yaml").exists():
         return LogFormatError(bag, f"cannot read the bag: no metadata.yaml (a recording that was killed?): "
-                                   f"'ros2 bag reindex {bag}' writes it")
-    if bag.is_file() and "index" in text.lower():
+                                   f"'ros2 bag reindex {bag}"
+                                   f"{' -s mcap' if storage[0].suffix == '.mcap' else ''}' writes it")
+    if bag.is_file() and type(exc).__module__.startswith("rosbags") and "index" in text.lower():
         return LogFormatError(bag, f"cannot read the bag: {text} (a recording that was killed?): "
                                    f"'rosbag reindex {bag}' mends it")
     return LogFormatError(bag, f"cannot read the bag: {text}")
