@@ -69,6 +69,12 @@ app = typer.Typer(
 _VERBOSITY = [1]
 
 
+def _warn(warnings) -> None:
+    """Each warning on one line of the error stream (never quieted by -q)."""
+    for w in warnings:
+        typer.echo(f"odomgraph: warning: {' '.join(str(w).split())}", err=True)
+
+
 def _out(message: str = "", level: int = 1) -> None:
     """An informational line on stdout, shown at verbosity ``level`` or above
     (errors and warnings go to stderr whatever -q says)."""
@@ -328,8 +334,7 @@ def _print_summary(s: dict) -> None:
         _out(f"  noise scale {sensor}: measured {v['measured']:.2f}, applied {v['applied']:.2f}", level=2)
     why = "; ".join(s.get("status_reasons", []))
     _out(f"  status: {s['status']}" + (f" ({why})" if why else ""))
-    for w in s.get("warnings", []):
-        typer.echo(f"odomgraph: warning: {' '.join(str(w).split())}", err=True)
+    _warn(s.get("warnings", []))
 
 
 @app.command()
@@ -731,8 +736,7 @@ def calibrate(
     a, b = rep["dead_reckoning_nominal"], rep["dead_reckoning_calibrated"]
     _out(f"dead reckoning on this log (vs {rep['reference']}): RMS {a['rms_m']:.3f} -> {b['rms_m']:.3f} m, "
                f"final {a['final_m']:.3f} -> {b['final_m']:.3f} m")
-    for w in rep["warnings"]:
-        typer.echo(f"odomgraph: warning: {' '.join(str(w).split())}", err=True)
+    _warn(rep["warnings"])
     for w in rep["problems"]:
         typer.echo(f"odomgraph: warning: written with --force despite: {' '.join(str(w).split())}", err=True)
     _out(f"wrote {output}")
@@ -818,7 +822,8 @@ def stream(
     if replay is not None:
         from odomgraph.io.log import read_log
         from odomgraph.io.stream import log_lines
-        lines, source = log_lines(read_log(replay)), str(replay)
+        replayed = read_log(replay)
+        lines, source = log_lines(replayed), str(replay)
     else:
         import io
         # universal newlines (a bare CR ends a line too); bytes that are no UTF-8 become a bad line
@@ -829,6 +834,8 @@ def stream(
                     skip_lines=live.lines_read if (resume is not None and replay is not None) else 0)
     for line in summary_lines(live, st):
         typer.echo(f"odomgraph: {line}", err=True)
+    if replay is not None:
+        _warn(replayed.warnings)    # the log's own (a read fix, an import's assumption), as estimate says them
     if history is not None:
         if live.final is None:
             raise _click_exc.UsageError("--history: only isam2 and fixed-lag smooth the whole stream")
@@ -962,8 +969,7 @@ def import_(
         "notes": list(log.notes), "warnings": [" ".join(str(w).split()) for w in log.warnings]})
     write_log(log, output, inputs)
     _out(f"wrote {output} ({'; '.join(log.notes)})")
-    for w in log.warnings:
-        typer.echo(f"odomgraph: warning: {' '.join(str(w).split())}", err=True)
+    _warn(log.warnings)
 
 
 def main() -> None:

@@ -55,7 +55,7 @@ from pathlib import Path
 import numpy as np
 
 from odomgraph import state as S
-from odomgraph.errors import EstimatorDivergedError, OdomgraphError, OptionError
+from odomgraph.errors import EstimatorDivergedError, NotEnoughDataError, OdomgraphError, OptionError
 from odomgraph.estimators.ekf import EKF, event_values
 from odomgraph.estimators.initial import CONSENSUS_WINDOW
 from odomgraph.estimators.measurements import from_log
@@ -64,7 +64,7 @@ from odomgraph.estimators.schedule import Schedule
 from odomgraph.estimators.sensors import DOF, SENSOR_NAMES, WHEEL, event_stream
 from odomgraph.estimators.slipcheck import in_stretches
 from odomgraph.io.csvtable import ORIGIN_ABOVE, ORIGIN_BELOW, split_stamps
-from odomgraph.io.log import SCHEDULE_LEAD_S, SENSOR_FILE, SENSOR_FILES, Gps, Log, Ranges
+from odomgraph.io.log import SENSOR_FILE, SENSOR_FILES, Gps, Log, Ranges, schedule_origin
 from odomgraph.io.stream import SENSOR_COLUMNS
 from odomgraph.io.robot import RobotConfig
 
@@ -457,13 +457,32 @@ class Online:
         return b
 
     def _advance(self, final: bool) -> list[OnlineRow]:
-        try:
-            return self._advance_once(final)
-        except EstimatorDivergedError as exc:
-            if final or len(self.restarts) >= MAX_RESTARTS:
-                raise
-            self._restart(exc)
-            return []
+        kept: list[OnlineRow] = []
+        while True:
+            try:
+                return kept + self._advance_once(final)
+            except EstimatorDivergedError as exc:
+                if len(self.restarts) >= MAX_RESTARTS:
+                    raise
+                # the rows a live stream would have given before the failing chunk (_filter)
+                done = getattr(exc, "rows_before", [])
+                if done:
+                    self.last = done[-1]
+                kept += done
+                self._restart(exc)
+                if not final:
+                    return kept
+            except NotEnoughDataError:
+                if not (final and self.restarts):
+                    raise
+                # closing right after a restart with too few rows left to start on: the
+                # rows so far stand, and the restart says where they end
+                self.restarts[-1] += "; too few rows were left after it to start again"
+                return kept
+            # Closing (the stream's end, or a short log's whole run at close): no more
+            # rows will come to warm up on, so the restarted estimator runs on the rest
+            # now (a probe: a 25 s replay whose window slipped stopped with exit 1 where
+            # estimate gave flagged rows).
 
     def _frame_check(self, init, log: Log) -> None:
         """A run that starts in the wheels' own frame (initial.InitialState
@@ -653,15 +672,13 @@ class Online:
         firsts = [rows[0][0] for name in ("encoders", "wheel_speeds") if (rows := self._raw[name])]
         if not firsts or self.t_first is None:
             return None
-        w0 = min(firsts)
-        return w0 if w0 - self.t_first > SCHEDULE_LEAD_S else self.t_first
+        return schedule_origin(self.t_first, min(firsts))
 
     def _start(self, final: bool = False) -> None:
         """Warm-up done: the whole-log decisions on the rows so far (see the module doc)."""
         log = self._log(-math.inf)
         wheel = log.encoders if log.encoders is not None else log.wheel_speeds
         if wheel is None or len(wheel.t) < 3:
-            from odomgraph.errors import NotEnoughDataError
             raise NotEnoughDataError(f"{0 if wheel is None else len(wheel.t)} encoder or wheel_speeds rows in the "
                                      f"first {self.warmup:g} s of the stream (or all of it): nothing to estimate "
                                      "from")
@@ -687,7 +704,14 @@ class Online:
         for k in range(n):
             code = int(code_ev[k])
             self._fail_t = float(t_ev[k])
-            nis = ekf.step(t_ev[k], code, *event_values(meas, code, row_ev[k]), in_slip=bool(slip[k]))
+            try:
+                nis = ekf.step(t_ev[k], code, *event_values(meas, code, row_ev[k]), in_slip=bool(slip[k]))
+            except EstimatorDivergedError as exc:
+                # A long span filtered at once (a short log's whole run at close, the warm-up)
+                # keeps the rows a live stream in chunks would have given before the failing
+                # chunk: failing at a log's last event lost every row of it.
+                exc.rows_before = [r for r in out if r.t < self._fail_t - self.chunk]
+                raise
             name = SENSOR_NAMES[code]
             _Counts.add(counts.accepted if nis >= 0 else counts.rejected, name)
             if nis >= 0:
@@ -751,8 +775,7 @@ class Online:
                 getattr(self.smoother.runner, "settle_warnings", []))
             if self.smoother.watch is not None:
                 from odomgraph.estimators.heading import warning
-                warnings.append(warning(self.smoother.watch.t_known, self.smoother.runner.prob.meas.t_start,
-                                        self.smoother.watch))
+                warnings.append(warning(self.smoother.watch.t_known, self.smoother.watch))
         for k, v in self._nis.items():
             if v[1] >= 100 and v[0] / v[1] > NIS_WARN * v[2]:
                 warnings.append(f"{k}: mean NIS {v[0] / v[1]:.1f} over {v[1]} updates, expected {v[2]}: the "
@@ -854,7 +877,6 @@ class _Smoother:
         while m + 2 < len(self.kf_times) and self.kf_times[m + 1] <= b and m + 1 < prob.kf.n - 1:
             m += 1
         if m < 2:
-            from odomgraph.errors import NotEnoughDataError
             raise NotEnoughDataError(f"{online.method.value}: fewer than 3 keyframes in the warm-up "
                                      f"({online.warmup:g} s); give a longer --warmup")
         cut, t_next = GrowingProblem.cut(prob, m)

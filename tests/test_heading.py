@@ -142,6 +142,36 @@ def test_driving_before_weak_fixes_show_the_heading(seed):
         assert cov >= 0.95, (method, cov)
 
 
+@pytest.mark.parametrize("method, seed", [("ekf", 17), ("isam2", 19)])
+def test_the_heading_warning_gives_the_rows_times(method, seed):
+    """A log whose clock starts at 37 s (below a real clock's, so not
+    rebased): the warning's "until t=" is the rows' time. It counted from
+    the schedule's origin and said t=28 s where the rows' heading firmed at
+    65 s. The same log from 0 s says it 37 s earlier."""
+    from dataclasses import replace
+
+    from odomgraph.io.log import SENSOR_FILE
+    from odomgraph.sim.faults import Faults, inject
+    from odomgraph.sim.scenarios import yard
+    base = yard(50.0)
+    log = inject(base.with_(robot=base.robot.with_(gps_sigma=2.0), rates=replace(base.rates, gps=1.0)), Faults(), seed)
+    late = replace(log, **{k: replace(o, t=o.t + 37.0) for k in SENSOR_FILE if (o := getattr(log, k)) is not None},
+                   truth=log.truth.shifted(37.0))
+    assert late.t_start == pytest.approx(log.t_start + 37.0)
+
+    def until(lg):
+        est = estimate(lg, method, Schedule(20.0), fit_noise=False)
+        said = [w for w in est.warnings if w.startswith("heading not observable until t=")]
+        assert len(said) == 1, est.warnings
+        return float(said[0].split("t=")[1].split(" s")[0]), est
+    u0, _ = until(log)
+    u1, est = until(late)
+    assert u1 == pytest.approx(u0 + 37.0, abs=0.11)
+    rows = est.online if method == "isam2" else est
+    # the rows before it carry the heading's sigma pi (heading.widen_rows), those after narrow from there
+    assert rows.sigma[rows.t < u1 - 0.5, 2].min() > 3.0 and rows.sigma[rows.t > u1 + 0.5, 2].max() < 3.0
+
+
 def test_the_circle_is_the_path_around_the_fixes_mean():
     """HeadingWatch.arm: the lever arm standing still; driving 4 m straight
     with a fix each metre, the distance from the centre to the mean

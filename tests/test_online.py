@@ -174,6 +174,66 @@ def test_a_divergence_beyond_recovery_restarts_the_stream(monkeypatch, method):
     assert all(np.isfinite(r.mean).all() and np.isfinite(r.sigma).all() for r in rows)
 
 
+@pytest.mark.parametrize("method, scenario, seed, t_fail", [("ekf", "yard", 23, 14.0), ("isam2", "paper", 24, 9.0),
+                                                         ("fixed-lag", "yard", 25, 18.0)])
+def test_a_divergence_at_close_restarts_too(monkeypatch, method, scenario, seed, t_fail):
+    """A log shorter than the warm-up runs whole when the stream closes; an
+    estimator giving up then stopped the stream with exit 1 and no row (a
+    probe's 25 s replay whose calibration window slipped, where estimate
+    gave flagged rows). Now it restarts there as mid-stream, and the rows
+    after the failure come out, near the truth."""
+    from odomgraph.errors import EstimatorDivergedError
+    from odomgraph.estimators import ekf, incremental
+    log = simulate({"paper": paper, "yard": yard}[scenario](28.0), seed)
+    once = {"done": False}
+    cls, name = (ekf.EKF, "step") if method == "ekf" else (incremental._Runner, "advance")
+    real = getattr(cls, name)
+
+    def failing(self, *args, **kw):
+        t = args[0] if method == "ekf" else float(self.prob.kf.t[args[0]])
+        if t > t_fail and not once["done"]:
+            once["done"] = True
+            raise EstimatorDivergedError(f"diverged on purpose at t={t:.2f} s")
+        return real(self, *args, **kw)
+    monkeypatch.setattr(cls, name, failing)
+    live, rows = _stream(log, Schedule(calibrate_until=20.0), method=method)
+    assert len(live.restarts) == 1 and "diverged on purpose" in live.restarts[0]
+    assert live.summary()["restarts"] == live.restarts
+    t = np.array([r.t for r in rows])
+    # the EKF's rows before the failing chunk stand (a smoother's are in the failed solve)
+    assert (t[0] < 0.5 if method == "ekf" else t[0] >= t_fail - 0.5) and t[-1] > 27.0 and np.all(np.diff(t) > 0)
+    x, y = log.truth.at("x", t), log.truth.at("y", t)
+    err = np.hypot(np.array([r.mean[0] for r in rows]) - x, np.array([r.mean[1] for r in rows]) - y)
+    sig = np.hypot(*np.array([r.sigma[:2] for r in rows]).T)
+    assert err.max() < 0.3 and np.mean(err < 3 * sig) > 0.9, (err.max(), np.mean(err < 3 * sig))
+    assert all(np.isfinite(r.mean).all() and np.isfinite(r.sigma).all() for r in rows)
+
+
+def test_a_divergence_at_close_with_nothing_left_keeps_its_rows(monkeypatch):
+    """Failing on the log's last event at close: the rows a live stream
+    would have given before it stand (every row of the log was lost),
+    nothing is left to start again on, and the restart says so; no error."""
+    from odomgraph.errors import EstimatorDivergedError
+    from odomgraph.estimators import ekf
+    log = simulate(yard(20.0), 26)
+    sch = Schedule(calibrate_until=10.0)
+    _, ref = _stream(log, sch)
+    t_last = float(log.encoders.t[-1])
+    real = ekf.EKF.step
+
+    def failing(self, t, *args, **kw):
+        if t >= t_last:
+            raise EstimatorDivergedError("diverged on purpose at the end")
+        return real(self, t, *args, **kw)
+    monkeypatch.setattr(ekf.EKF, "step", failing)
+    live, rows = _stream(log, sch)
+    want = [r for r in ref if r.t < t_last - live.chunk]
+    assert len(rows) == len(want) > 900
+    assert all(np.array_equal(a.mean, b.mean) and np.array_equal(a.sigma, b.sigma) for a, b in zip(rows, want))
+    assert len(live.restarts) == 1
+    assert live.restarts[0].endswith("too few rows were left after it to start again")
+
+
 @pytest.mark.parametrize("method, seed", [("isam2", 19), ("fixed-lag", 21)])
 def test_a_restart_in_the_middle_of_a_slip_keeps_the_calibration(monkeypatch, method, seed):
     """Restarted at 40 s, inside the paper scenario's slip, pose sigma widened:

@@ -291,6 +291,11 @@ def test_the_import_s_warnings_stay_with_the_log(sim, tmp_path):
     from odomgraph.pipeline import calibrate
     _, report = calibrate(log)
     assert report["warnings"][:2] == [f"import: {w}" for w in prov["warnings"]]
+    # and the stream replaying the log says them after its summary (it said none)
+    res = run(app, ["stream", "--replay", str(tmp_path / "log"), "--method", "ekf"])
+    assert res.exit_code == 0, res.stderr
+    said = [ln for ln in res.stderr.splitlines() if ln.startswith("odomgraph: warning: import: ")]
+    assert said == [f"odomgraph: warning: import: {' '.join(w.split())}" for w in prov["warnings"]]
     # a damaged record is ignored, said
     (tmp_path / "log" / "import.json").write_text("[1, 2]")
     assert read_log(tmp_path / "log").warnings == ("import.json: not an import record (not a JSON object); ignored",)

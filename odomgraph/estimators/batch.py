@@ -735,7 +735,7 @@ def smoother_estimate(prob: Problem, schedule: Schedule, pose: np.ndarray, W: np
             o = extra["online"]
             n += heading.widen_rows(o.t, o.sigma, o.pose_cov, until, watch, o.mean)
         if n:
-            warnings = list(warnings) + [heading.warning(until, prob.meas.t_start, watch)]
+            warnings = list(warnings) + [heading.warning(until, watch)]
     from odomgraph.estimators import gaps
     # A silence of every sensor: the rows there are drawn between the states
     # either side, which say nothing of the path's shape (a probe's 30 s
@@ -785,8 +785,7 @@ def measurement_counts(prob: Problem) -> dict[str, int]:
     made a run degraded (a probe's bag with a noisy wheel driver). From the
     keyframes, so that a stream (estimators.growing) counts as its replay."""
     kf = prob.kf
-    wheel = int(np.sum(kf.enc_n)) if kf.enc_n is not None else kf.n - 1
-    out = {"encoders": wheel, "gyro": int(np.sum(kf.gyro_n)), "velocity": int(np.sum(kf.vel_n)),
+    out = {"encoders": int(np.sum(kf.enc_n)), "gyro": int(np.sum(kf.gyro_n)), "velocity": int(np.sum(kf.vel_n)),
            "gps": int(kf.gps_k.size), "ranges": int(kf.rng_k.size)}
     return {k: v for k, v in out.items() if v}
 

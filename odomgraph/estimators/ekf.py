@@ -933,7 +933,7 @@ class EKF:
             return []
         from odomgraph.estimators.heading import warning
         return [warning(self.heading_known_at if self.heading_known_at is not None else float("inf"),
-                        self.meas.t_start, getattr(self, "heading_decided", None) or self.heading_watch)]
+                        getattr(self, "heading_decided", None) or self.heading_watch)]
 
 
 def event_values(meas, code: int, i: int) -> tuple:

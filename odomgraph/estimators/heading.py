@@ -271,15 +271,17 @@ def widen_rows(t: np.ndarray, sigma: np.ndarray, pose_cov: np.ndarray | None, un
     return n
 
 
-def warning(until: float, t0: float, watch: HeadingWatch | None = None) -> str:
+def warning(until: float, watch: HeadingWatch | None = None) -> str:
     """The one-line warning of a stretch with the heading unknown; with the
     ``watch`` that decided, it names what the heading waited for: the robot
-    to move, or the fixes (which came late, or showed no motion yet)."""
+    to move, or the fixes (which came late, or showed no motion yet). Times
+    are the log's, as the rows' and every other warning's (they counted from
+    the schedule's origin, seconds off the rows where other sensors led)."""
     if watch is not None and until < math.inf and watch.t_wheels < until:
-        first = (f"the first fix came at t={watch.t_first_fix - t0:.1f} s" if watch.t_first_fix < math.inf
+        first = (f"the first fix came at t={watch.t_first_fix:.1f} s" if watch.t_first_fix < math.inf
                  else "no fix came")
-        return (f"heading not observable until t={until - t0:.1f} s, when the fixes first showed the motion "
-                f"({first}; the wheels had moved from t={watch.t_wheels - t0:.1f} s): before it, heading sigma is "
+        return (f"heading not observable until t={until:.1f} s, when the fixes first showed the motion "
+                f"({first}; the wheels had moved from t={watch.t_wheels:.1f} s): before it, heading sigma is "
                 "pi and x, y sigma include the circle the centre can lie on (the wheels' path's around the fixes' "
                 "mean)")
     if until == math.inf:
@@ -287,6 +289,6 @@ def warning(until: float, t0: float, watch: HeadingWatch | None = None) -> str:
                 "fixes' trailing median, never moved 3 fix sigmas, at least 5 cm, from where it started); heading "
                 "sigma is pi, and x, y sigma include the circle the centre can lie on (the GPS lever arm's, or "
                 "the wheels' path's around the fixes' mean)")
-    return (f"heading not observable until t={until - t0:.1f} s, when the robot first moved: before it, heading "
+    return (f"heading not observable until t={until:.1f} s, when the robot first moved: before it, heading "
             "sigma is pi and x, y sigma include the circle the centre can lie on (the lever arm's standing still, "
             "the wheels' path's around the fixes' mean once it drove)")

@@ -39,6 +39,9 @@ class Keyframes:
     """(N-1, 2) average nominal-converted (left, right) wheel speed over each interval [m/s]."""
     enc_sigma: np.ndarray
     """(N-1, 2) its 1-sigma: eq. 41 averaged over the samples, plus quantisation [m/s]."""
+    enc_n: np.ndarray
+    """(N-1,) wheel rows (encoders.csv or wheel_speeds.csv) in each interval
+    (t_k, t_{k+1}]: the rows the smoothers count as used (batch.measurement_counts)."""
     gyro_z: np.ndarray
     """(N-1,) average gyro reading over each interval [rad/s] (interval_means)."""
     gyro_sigma: np.ndarray
@@ -87,9 +90,6 @@ class Keyframes:
     rng_bend: np.ndarray | None = None
     gps_t: np.ndarray | None = None
     """(G,) time of each fix [s]."""
-    enc_n: np.ndarray | None = None
-    """(N-1,) wheel rows (encoders.csv or wheel_speeds.csv) in each interval
-    (t_k, t_{k+1}]: the rows the smoothers count as used (batch.measurement_counts)."""
 
     @cached_property
     def dt(self) -> np.ndarray:

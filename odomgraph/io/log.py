@@ -226,11 +226,8 @@ class Log:
         SCHEDULE_LEAD_S before them: a GPS receiver or an IMU logging while
         the wheel driver had not started yet (a probe's bag: 150 s) let the
         calibration window pass with no wheel row in it."""
-        t0 = self.t_start
         wheel = self.encoders if self.encoders is not None else self.wheel_speeds
-        if wheel is None or not len(wheel.t) or float(wheel.t[0]) - t0 <= SCHEDULE_LEAD_S:
-            return t0
-        return float(wheel.t[0])
+        return schedule_origin(self.t_start, float(wheel.t[0]) if wheel is not None and len(wheel.t) else None)
 
     @property
     def t_end(self) -> float:
@@ -267,11 +264,10 @@ def _provenance(path: Path) -> tuple[dict | None, tuple[str, ...]]:
     """IMPORT_FILE's content and the warnings it carries (each prefixed
     "import: "); a file that is not what import writes is ignored with a
     warning, not refused: it is not a sensor file and nothing needs it."""
-    p = path
     try:
         if not _optional(path):
             return None, ()
-        prov = json.loads(read_text(p))
+        prov = json.loads(read_text(path))
         if not isinstance(prov, dict):
             raise ValueError("not a JSON object")
         warns = prov.get("warnings", [])
@@ -279,7 +275,7 @@ def _provenance(path: Path) -> tuple[dict | None, tuple[str, ...]]:
             raise ValueError("'warnings' is not a list of strings")
     except (ValueError, RecursionError, LogFormatError) as exc:
         why = exc.problem if isinstance(exc, LogFormatError) else str(exc)
-        return None, (f"{p.name}: not an import record ({shown(why, 80)}); ignored",)
+        return None, (f"{path.name}: not an import record ({shown(why, 80)}); ignored",)
     return prov, tuple(f"import: {w}" for w in warns)
 
 
@@ -288,6 +284,14 @@ def _provenance(path: Path) -> tuple[dict | None, tuple[str, ...]]:
 #: together start a fraction of a period apart, and the simulator's logs
 #: and every recording shipped keep their schedule.
 SCHEDULE_LEAD_S = 1.0
+
+
+def schedule_origin(t_first: float, t_wheel: float | None) -> float:
+    """The schedule's origin [s] (Log.t_schedule) from the first row of any
+    sensor and the wheels' first row (None: no wheel row): the wheels' when
+    it came over SCHEDULE_LEAD_S after the first. One rule for a read log
+    and for a stream's rows so far (online.Stream)."""
+    return t_wheel if t_wheel is not None and t_wheel - t_first > SCHEDULE_LEAD_S else t_first
 
 
 def _optional(path: Path):
