@@ -271,8 +271,12 @@ def _estimate_checked(log: Log, method: Method, schedule: Schedule, progress, op
     from odomgraph.analysis.mounting import mounting_warnings
     from odomgraph.errors import EstimatorDivergedError
     motion: dict[str, float] = {}
+    wheel_f = None
     if fit_noise:
-        from odomgraph.analysis.noise import motion_scales, widened_motion
+        from odomgraph.analysis.noise import motion_scales, wheel_row_scale, widened_motion, widened_wheels
+        # the wheel rows' own noise first: the motion's measure takes it out of the speeds' steps
+        wheel_f = wheel_row_scale(log)
+        log = widened_wheels(log, wheel_f)
         motion = motion_scales(log)
         log = widened_motion(log, motion)
     def run(schedule: Schedule, options: dict) -> tuple[Estimate, dict]:
@@ -345,6 +349,7 @@ def _estimate_checked(log: Log, method: Method, schedule: Schedule, progress, op
     est.warnings += [w for w in suspect if w not in est.warnings] + _window_warnings(est, log, schedule)
     est.flags += suspect
     _note_motion_scales(est, log, motion)
+    _note_wheel_scale(est, log, wheel_f)
     return est
 
 
@@ -456,6 +461,24 @@ def _note_motion_scales(est: Estimate, log: Log, motion: dict[str, float]) -> No
                                 f"wanders {f:.2g}x faster than robot.toml's {getattr(pn, name) / f:.3g} {unit}/sqrt(s) "
                                 f"allows: it was widened to {getattr(pn, name):.3g} for this run (calibrate writes "
                                 "it back)")
+
+
+def _note_wheel_scale(est: Estimate, log: Log, f: float | None) -> None:
+    """Record the wheel_speeds rows' scatter (analysis.noise.wheel_row_scale)
+    in ``est.noise_scales["encoders"]``, with a warning when it was applied.
+    ``log`` is the widened log the estimate ran on."""
+    if f is None:
+        return
+    from odomgraph.analysis.noise import WHEEL_WIDEN_ABOVE
+    applied = f if f > WHEEL_WIDEN_ABOVE else 1.0
+    est.noise_scales["encoders"] = {"measured": f, "applied": applied}
+    if applied > 1.0:
+        a, b = log.robot.encoder_sigma
+        est.warnings.append(
+            f"wheel_speeds: consecutive rows scatter {f:.2g}x more than robot.toml's [encoders] sigma "
+            f"({a / f:.3g} m/s + {b / f:.3g} |v|) says (speeds differenced from quantised wheel positions carry "
+            f"noise that grows with the rate): it was widened to ({a:.3g}, {b:.3g}) for this run (set it in "
+            "robot.toml)")
 
 
 #: A calibration window with fewer absolute measurements than this calibrates nothing.

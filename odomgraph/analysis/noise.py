@@ -184,6 +184,68 @@ def widened_motion(log, scales: dict[str, float]):
     return log if not new else log.with_(robot=log.robot.with_(process=replace(pn, **new)))
 
 
+#: A wheel_speeds.csv scatter this far above robot.toml's encoder sigma is
+#: acted on (wheel_row_scale). Above WIDEN_ABOVE: the second differences
+#: also hold the motion's own changes, and rows differenced from quantised
+#: positions (moving-average noise) measure up to 1.29x their sigma; the
+#: simulator's quantised speeds measured 1.10-1.17 at 10 Hz, the libRSF
+#: cut's wheels 1.32 at 7.8 Hz, quantised ones at 50-200 Hz 1.4-8.8.
+WHEEL_WIDEN_ABOVE = 1.5
+#: Rows further apart than this many median periods end a run of rows (wheel_row_scale).
+WHEEL_MAX_GAP = 2.0
+
+
+def wheel_row_scale(log) -> float | None:
+    """The factor by which robot.toml's [encoders] sigma (paper eq. 41,
+    a + b |v|) would have to grow to match the scatter of the
+    wheel_speeds.csv rows (1: right); None for encoders.csv (whose rows
+    carry their tick quantisation: factors.encoder.speed_sigma) or fewer
+    than MIN_COUNT triplets of moving rows.
+
+    Measured from the log alone, before any estimate: the second
+    difference v[k+1] - 2 v[k] + v[k-1] of each wheel's rows leaves little
+    of a speed that changes smoothly (nothing of a constant acceleration)
+    and, of white noise sigma_k, the variance sigma_{k-1}^2 + 4 sigma_k^2 +
+    sigma_{k+1}^2. The robust scale (MAD) of the differences whitened so,
+    over triplets with no gap and a wheel moving. Wheel speeds an importer
+    differenced from a JointState's quantised positions (or a driver's own
+    Odometry twist) carry noise that grows as the rate: a probe's 100 Hz
+    rows scattered 2-4x the configured sigma, and the EKF, weighing each
+    row whole, gave a track scale 0.005 off at z -3.2, status ok (at 200
+    Hz it diverged)."""
+    from odomgraph.estimators.measurements import clean
+    w = log.wheel_speeds
+    if log.encoders is not None or w is None or len(w.t) < MIN_COUNT + 2:
+        return None
+    w = clean(log)[0].wheel_speeds
+    a, b = log.robot.encoder_sigma
+    dt = np.diff(w.t)
+    if dt.size < 2:
+        return None
+    med = float(np.median(dt))
+    ok = (dt[1:] <= WHEEL_MAX_GAP * med) & (dt[:-1] <= WHEEL_MAX_GAP * med)
+    z = []
+    for v in (w.v_left, w.v_right):
+        s2 = (a + b * np.abs(v)) ** 2
+        d2 = v[2:] - 2.0 * v[1:-1] + v[:-2]
+        var = s2[2:] + 4.0 * s2[1:-1] + s2[:-2]
+        sel = ok & ((v[2:] != 0) | (v[1:-1] != 0) | (v[:-2] != 0)) & np.isfinite(d2)
+        z.append(d2[sel] / np.sqrt(var[sel]))
+    z = np.concatenate(z)
+    if z.size < MIN_COUNT:
+        return None
+    return float(1.4826 * np.median(np.abs(z)))
+
+
+def widened_wheels(log, f: float | None):
+    """The log with robot.toml's [encoders] sigma (a, b) multiplied by ``f``
+    when it is above WHEEL_WIDEN_ABOVE (never narrowed)."""
+    if f is None or f <= WHEEL_WIDEN_ABOVE:
+        return log
+    a, b = log.robot.encoder_sigma
+    return log.with_(robot=log.robot.with_(encoder_sigma=(a * f, b * f)))
+
+
 #: The largest lag-1 correlation credited: a constant offset is correlation 1,
 #: which no finite sigma covers (sqrt(1.9 / 0.1) = 4.4 at most).
 MAX_CORRELATION = 0.9
