@@ -171,6 +171,6 @@ def test_the_heading_warning_names_the_late_fixes():
     for i in range(30):                                  # fixes from 40 s on, moving with the robot
         hw.fix(40.0 + 0.2 * i, (0.2 * i, 0.0))
     assert hw.known
-    msg = warning(hw.t_known, 0.0, hw)
+    msg = warning(hw.t_known, hw)
     assert "the first fix came at t=40.0 s" in msg and "the fixes first showed the motion" in msg, msg
-    assert "when the robot first moved" in warning(hw.t_known, 0.0)
+    assert "when the robot first moved" in warning(hw.t_known)
