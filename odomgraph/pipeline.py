@@ -477,8 +477,8 @@ def _note_wheel_scale(est: Estimate, log: Log, f: float | None) -> None:
         est.warnings.append(
             f"wheel_speeds: consecutive rows scatter {f:.2g}x more than robot.toml's [encoders] sigma "
             f"({a / f:.3g} m/s + {b / f:.3g} |v|) says (speeds differenced from quantised wheel positions carry "
-            f"noise that grows with the rate): it was widened to ({a:.3g}, {b:.3g}) for this run (set it in "
-            "robot.toml)")
+            f"noise that grows with the rate): it was widened to ({a:.3g}, {b:.3g}) for this run (calibrate "
+            "writes it back)")
 
 
 #: A calibration window with fewer absolute measurements than this calibrates nothing.
@@ -1222,8 +1222,9 @@ def _calibration_checks(log: Log, est: Estimate, k, sk, method: Method, schedule
 
 def _with_fitted_noise(robot, est: Estimate, warnings: list, per_fix_gps: bool = False):
     """The robot with each GPS/range sigma widened by the scale the data asked
-    for (pipeline._with_noise_scales), and each velocity random-walk intensity
-    ([process] accel, yaw_accel; _note_motion_scales): calibrate writes them back.
+    for (pipeline._with_noise_scales), the wheel speeds' [encoders] sigma
+    (_note_wheel_scale), and each velocity random-walk intensity ([process]
+    accel, yaw_accel; _note_motion_scales): calibrate writes them back.
     ``per_fix_gps``: gps.csv has its own sigma column, which robot.toml's gps
     sigma does not stand for (LOG_FORMAT), so that one is left as it is; so
     is a sigma a filter widened from its predictions (analysis.noise.
@@ -1239,6 +1240,9 @@ def _with_fitted_noise(robot, est: Estimate, warnings: list, per_fix_gps: bool =
             continue
         if f > 1.0:
             robot = robot.with_(**{field_name: getattr(robot, field_name) * f})
+    f = est.noise_scales.get("encoders", {}).get("applied", 1.0)
+    if f > 1.0:                        # wheel_speeds.csv rows' scatter (_note_wheel_scale)
+        robot = robot.with_(encoder_sigma=tuple(v * f for v in robot.encoder_sigma))
     from dataclasses import replace
     pn = robot.process
     grown = {k: getattr(pn, k) * est.noise_scales[k]["applied"] for k in ("accel", "yaw_accel")

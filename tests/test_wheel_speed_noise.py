@@ -78,3 +78,16 @@ def test_the_ekf_on_noisy_high_rate_wheel_speeds_is_within_its_sigma(scenario, h
     assert len(said) == 1 and est.noise_scales["encoders"]["applied"] > WHEEL_WIDEN_ABOVE
     z = (est.mean[-1, S.SCALE] - np.array(sc.scales)) / est.sigma[-1, S.SCALE]
     assert np.abs(z).max() < 3.0, z
+
+
+def test_calibrate_writes_the_widened_sigma_back():
+    """The widening is the rows' own noise, as the GPS sigma's is: calibrate
+    writes robot.toml's [encoders] sigma widened by it (a stream run with the
+    calibrated robot.toml then weighs the rows as estimate did)."""
+    from odomgraph.pipeline import calibrate
+    _, log = _sim(yard, 100, 36, 60.0)
+    ws = _quantised_speeds(log)
+    new, report = calibrate(ws, tune=False)
+    f = report["noise_scales"]["encoders"]["applied"]
+    assert f > WHEEL_WIDEN_ABOVE
+    np.testing.assert_allclose(new.encoder_sigma, np.array(ws.robot.encoder_sigma) * f, rtol=1e-12)

@@ -100,12 +100,17 @@ def from_log(log: Log, frozen: bool = True) -> Measurements:
                                  "time does not increase (read the log with read_log, which drops rows written "
                                  "twice)")
     notes = []
-    n_rows = len(log.encoders.t) if log.encoders is not None else 0
+    raw = log.encoders
     log, spikes = clean(log, frozen)
-    if log.encoders is not None and len(log.encoders.t) < n_rows:
-        notes.append(f"encoders: {n_rows - len(log.encoders.t)} row(s) whose speed spiked only for their stamp "
-                     "(a driver stamping rows as they arrive?) merged into the next row, their ticks carried "
-                     "(measurements.restamped)")
+    if raw is not None and len(raw.t) == len(log.encoders.t):
+        # rows whose ticks changed, less those despike rewrote as glitches
+        n = int(np.sum((raw.ticks_left != log.encoders.ticks_left) | (raw.ticks_right != log.encoders.ticks_right)))
+        n -= spikes.get("encoders", 0)
+        if n > 0:
+            # (no count: a stream's windows each say it, and one line stands for them all)
+            notes.append("encoders: rows whose speed spiked only for their stamp (a driver stamping rows as they "
+                         "arrive?) had their ticks spread over their neighbours' intervals, the total kept "
+                         "(measurements.restamped)")
     r = log.robot
     a, b = r.encoder_sigma
     if log.encoders is not None:
@@ -244,55 +249,70 @@ MERGE_WITHIN = 0.5
 
 
 def restamped(e, robot) -> tuple:
-    """(encoders, rows merged): encoder rows whose speed spikes only for a
-    stamp off (the driver stamped the row when it arrived, late by a few
-    ms), merged into the next row, their ticks carried.
+    """(encoders, intervals re-spread): encoder rows whose speed spikes only
+    for a stamp off (the driver stamped the row when it arrived, late by a
+    few ms), their ticks spread over the intervals around them.
 
     Such a row's ticks are right and its interval wrong, and so is its
     neighbour's, the other way: over the two intervals together the speed
     is the neighbours'. Rewritten as a counter glitch, its ticks were lost
     (a probe's rows late by |N(0, 10 ms)| at 50 Hz: 826 of 7498 rewritten,
-    wheel scales 5 % low at z -73, status ok). A spike row merged with the
-    interval before or after it (or with two, MERGE_MAX) when both wheels'
-    speed over them is within MERGE_WITHIN / (n - 1) of the spike test's
-    threshold of its neighbours' median, n intervals merged (the fewest, then
-    the closest); a
-    counter glitch stays a spike over two intervals too."""
+    wheel scales 5 % low at z -73, status ok). A spike interval and the one
+    before or after it (or two, MERGE_MAX) whose speed together, both
+    wheels, is within MERGE_WITHIN / (n - 1) of the spike test's threshold
+    of its neighbours' median (the fewest intervals, then the closest) get
+    the group's ticks in proportion to their durations (rounded on the
+    running count, so the total stays). Rows and stamps stay: the live
+    smoothers key their keyframes to the rows (a second read: merging rows
+    away broke them). No group holds an interval longer than GAP_FACTOR
+    median periods: a stamp error does not make a dropout, and over one a
+    counter glitch's extra ticks look like travel. A counter glitch stays a
+    spike over two intervals too, and is rewritten by despike."""
     from dataclasses import replace
     tpm = (robot.ticks_per_meter_left, robot.ticks_per_meter_right)
     dt = np.diff(e.t)
+    if dt.size < 3:
+        return e, 0
+    long = dt > GAP_FACTOR * np.median(dt)
     t = 0.5 * (e.t[1:] + e.t[:-1])
     ticks = (np.asarray(e.ticks_left, float), np.asarray(e.ticks_right, float))
     tests = [_hampel(t, tk[1:] / (c * dt), SPIKE_ACCEL, np.maximum(SPIKE_FLOOR[0], SPIKE_TICKS / (c * dt)))
              for tk, c in zip(ticks, tpm)]
-    drop = np.zeros(len(e.t), bool)          # rows whose stamp goes (their ticks into the next row)
+    used = np.zeros(dt.size, bool)           # intervals in a group already
+    groups = []
     for i in np.flatnonzero(tests[0][0] | tests[1][0]):
-        if drop[i] or drop[i + 1]:
-            continue                          # already merged with a neighbour
+        if used[i]:
+            continue
         best = None
         for n in range(2, MERGE_MAX + 1):     # the fewest intervals that explain it
-            for j in range(i - n + 1, i + 1):     # intervals j .. j + n - 1: rows j + 1 .. j + n - 1 go
-                if j < 0 or j + n >= len(e.t) or drop[j:j + n + 1].any():
+            for j in range(i - n + 1, i + 1):     # intervals j .. j + n - 1
+                if j < 0 or j + n > dt.size or used[j:j + n].any() or long[j:j + n].any():
                     continue
                 span = e.t[j + n] - e.t[j]
-                dev = max(abs(tk[j + 1:j + n + 1].sum() / (c * span) - med[i]) / thr[i]
-                          for tk, c, (_, med, thr) in zip(ticks, tpm, tests))
                 # a glitch's extra ticks spread over n intervals shrink as 1/n; a stamp's
                 # error is gone once its neighbours are in: the bound shrinks alike
+                dev = max(abs(tk[j + 1:j + n + 1].sum() / (c * span) - med[i]) / thr[i]
+                          for tk, c, (_, med, thr) in zip(ticks, tpm, tests))
                 if dev <= MERGE_WITHIN / (n - 1) and (best is None or dev < best[0]):
                     best = (dev, j, n)
             if best is not None:
                 break
         if best is not None:
-            drop[best[1] + 1:best[1] + best[2]] = True
-    if not drop.any():
+            _, j, n = best
+            used[j:j + n] = True
+            groups.append((j, n))
+    if not groups:
         return e, 0
-    keep = np.flatnonzero(~drop)
     new = {}
     for name, tk in zip(("ticks_left", "ticks_right"), ticks):
-        c = np.cumsum(tk)[keep]
-        new[name] = np.concatenate([tk[:1], np.diff(c)]).astype(np.asarray(getattr(e, name)).dtype)
-    return replace(e, t=e.t[keep], **new), int(drop.sum())
+        c = np.cumsum(tk)
+        for j, n in groups:
+            # the running count at the group's inner rows, in proportion to time
+            share = (e.t[j + 1:j + n] - e.t[j]) / (e.t[j + n] - e.t[j])
+            c[j + 1:j + n] = np.round(c[j] + share * (c[j + n] - c[j]))
+        out = np.concatenate([tk[:1], np.diff(c)])
+        new[name] = out.astype(np.asarray(getattr(e, name)).dtype)
+    return replace(e, **new), len(groups)
 
 
 def despike(log: Log) -> tuple[Log, dict[str, int]]:
@@ -312,7 +332,7 @@ def despike(log: Log) -> tuple[Log, dict[str, int]]:
     if log.encoders is not None and len(log.encoders.t) > 8:
         e = log.encoders
         for _ in range(MERGE_PASSES):
-            # a merge settles its neighbours' windows, which may then show another
+            # a group settles its neighbours' windows, which may then show another
             e, merged = restamped(e, r)
             if not merged:
                 break
