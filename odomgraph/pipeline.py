@@ -924,8 +924,10 @@ def tune_process_noise(log: Log, schedule: Schedule, method: Method = Method.bat
     # that the table holds the intensities that actually ran.
     floor = base
     if options.get("fit_noise", True):
-        from odomgraph.analysis.noise import motion_scales, widened_motion
-        floor = widened_motion(log, motion_scales(log)).robot.process
+        from odomgraph.analysis.noise import motion_scales, wheel_row_scale, widened_motion, widened_wheels
+        # measured as estimate measures it: after the wheel speeds' own scatter is widened
+        wl = widened_wheels(log, wheel_row_scale(log))
+        floor = widened_motion(wl, motion_scales(wl)).robot.process
     sensor = "gps" if held.gps is not None else "ranges"
     table, tried, errors, used = [], set(), [], []
     for j, f in enumerate(PROCESS_NOISE_FACTORS):
@@ -1102,9 +1104,11 @@ def _gyro_scale(log: Log, est: Estimate, schedule: Schedule, options: dict) -> d
     1 + STEP, on the noise model ``est`` fitted. Returns {"value", "sigma",
     "determined", "corrected", "sensitivity" (3,) d scale / d g, "line"}."""
     from odomgraph.analysis import gyroscale as G
-    from odomgraph.analysis.noise import widened
+    from odomgraph.analysis.noise import widened, widened_wheels
     # (not a filter's widening from its predictions: it is the run's, not the sensor's; analysis.noise.measured_from)
     fitted = widened(log, {k: v["applied"] for k, v in est.noise_scales.items() if v.get("from") != "predictions"})
+    # and the wheel speeds' own scatter (a second read: the profile ran them at the narrow sigma)
+    fitted = widened_wheels(fitted, est.noise_scales.get("encoders", {}).get("applied"))
     if est.time_offsets.get("gps"):
         # the GPS clock the run estimated (a clock off moves the fixes along the path: every turn with it)
         fitted = fitted.with_(robot=fitted.robot.with_(gps_time_offset=est.time_offsets["gps"]["value"]))

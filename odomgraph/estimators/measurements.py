@@ -315,7 +315,7 @@ def restamped(e, robot) -> tuple:
     return replace(e, **new), len(groups)
 
 
-def despike(log: Log) -> tuple[Log, dict[str, int]]:
+def despike(log: Log, restamp: bool = True) -> tuple[Log, dict[str, int]]:
     """The log without single-sample spikes in wheel speeds and yaw rate, and
     how many were taken out per sensor.
 
@@ -331,7 +331,7 @@ def despike(log: Log) -> tuple[Log, dict[str, int]]:
     r = log.robot
     if log.encoders is not None and len(log.encoders.t) > 8:
         e = log.encoders
-        for _ in range(MERGE_PASSES):
+        for _ in range(MERGE_PASSES if restamp else 0):
             # a group settles its neighbours' windows, which may then show another
             e, merged = restamped(e, r)
             if not merged:
@@ -610,7 +610,8 @@ def clean(log: Log, frozen: bool = True) -> tuple[Log, dict[str, int]]:
     ``saturation_notes`` say them, and pipeline.estimate makes those warnings).
     ``frozen``: False leaves a frozen receiver's fixes in (the live
     estimator's windows: a few seconds of a freeze look like a stall, and a
-    window starting inside one would keep a stale copy as its first fix)."""
+    window starting inside one would keep a stale copy as its first fix),
+    and arrival-stamped encoder rows as they are (restamped)."""
     from dataclasses import replace
     if log.gps is not None and len(log.gps.t) > 1:
         rep = repeated_fixes(log.gps)
@@ -632,7 +633,11 @@ def clean(log: Log, frozen: bool = True) -> tuple[Log, dict[str, int]]:
         # a check that corrects the stamps itself (metrics.gps_times), must
         # not apply it twice.
         log = log.with_(gps=replace(log.gps, t=log.gps.t - off), robot=log.robot.with_(gps_time_offset=0.0))
-    return despike(log)
+    # Arrival stamps (restamped) on the whole log only: its groups reach up to
+    # (SPIKE_HALF + MERGE_MAX - 1) x MERGE_PASSES rows ahead, past what a live
+    # window waits for (online.AHEAD_ROWS), and a window deciding otherwise
+    # than the next counts an interval's ticks twice or not at all.
+    return despike(log, restamp=frozen)
 
 
 def dead_reckoning(meas: Measurements, track: float, scales=(1.0, 1.0, 1.0)) -> tuple[np.ndarray, np.ndarray]:
