@@ -91,3 +91,19 @@ def test_calibrate_writes_the_widened_sigma_back():
     f = report["noise_scales"]["encoders"]["applied"]
     assert f > WHEEL_WIDEN_ABOVE
     np.testing.assert_allclose(new.encoder_sigma, np.array(ws.robot.encoder_sigma) * f, rtol=1e-12)
+
+
+def test_the_shipped_real_wheel_speeds_are_not_widened():
+    """The README's figures for the real logs: the libRSF cut's wheels (7.8 Hz,
+    a small robot pivoting fast) measure 1.32 and the Jackal's 0.25, under
+    WHEEL_WIDEN_ABOVE, so the real_data tables did not move."""
+    from pathlib import Path
+    from odomgraph.io.importers.librsf import import_librsf
+    data = Path(__file__).parent / "data"
+    f = wheel_row_scale(import_librsf(data / "librsf" / "Indoor_UWB_Input.txt"))
+    assert f == pytest.approx(1.32, abs=0.01) and f < WHEEL_WIDEN_ABOVE
+    pytest.importorskip("rosbags")
+    from odomgraph.io.importers.rosbag import import_rosbag
+    # the Jackal's JointState at 50 Hz: well inside robot.toml's sigma
+    assert wheel_row_scale(import_rosbag(data / "bags" / "jackal-test2.bag", track_width=0.37)) == pytest.approx(
+        0.25, abs=0.01)
