@@ -55,6 +55,7 @@ from pathlib import Path
 import numpy as np
 
 from odomgraph import state as S
+from odomgraph.analysis.metrics import NIS_MIN_COUNT, NIS_WARN, nis_warning
 from odomgraph.errors import EstimatorDivergedError, NotEnoughDataError, OdomgraphError, OptionError
 from odomgraph.estimators.ekf import EKF, event_values
 from odomgraph.estimators.initial import CONSENSUS_WINDOW
@@ -88,9 +89,6 @@ CONFIRM_AHEAD = 3
 #: them (an encoder row closes the interval since the one before, so its
 #: event lies inside the gap, before everything that came meanwhile).
 WHEEL_WAIT = 30.0
-#: A sensor's mean NIS over the stream beyond this many times its dimension:
-#: the estimate's sigma understates its error, and the summary says so.
-NIS_WARN = 3.0
 #: Restarts after a divergence (Online._restart) before the stream gives up and says why.
 MAX_RESTARTS = 20
 #: Floor [-] of the scale factors' prior 1-sigma after a restart (_restart): the
@@ -721,7 +719,7 @@ class Online:
                 # the filter's own running mean (its divergence watch's): said once per sensor when the
                 # rows' sigma stop covering what the sensor sees, well before the watch gives up
                 ema = ekf._nis_ema[code]
-                if not acc[3] and ekf._n_seen[code] > 100 and ema > NIS_WARN * DOF[code]:
+                if not acc[3] and ekf._n_seen[code] > NIS_MIN_COUNT and ema > NIS_WARN * DOF[code]:
                     acc[3] = True
                     self.alerts.append(f"{name}: the running mean NIS is {ema:.0f} (expected {DOF[code]}) at "
                                        f"t={t_ev[k]:.2f} s: the rows' sigma understate their error from here")
@@ -777,9 +775,9 @@ class Online:
                 from odomgraph.estimators.heading import warning
                 warnings.append(warning(self.smoother.watch.t_known, self.smoother.watch))
         for k, v in self._nis.items():
-            if v[1] >= 100 and v[0] / v[1] > NIS_WARN * v[2]:
-                warnings.append(f"{k}: mean NIS {v[0] / v[1]:.1f} over {v[1]} updates, expected {v[2]}: the "
-                                "estimate's sigma understates its error (a clock off, a sigma too small?)")
+            line = nis_warning(k, v[0], v[1], v[2])
+            if line:
+                warnings.append(line)
         accepted = dict(c.accepted)
         if self.smoother is not None:
             from odomgraph.estimators.batch import measurement_counts

@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 
 from odomgraph import state as S
-from odomgraph.analysis.metrics import nis_summary, truth_errors
+from odomgraph.analysis.metrics import nis_summary, nis_warnings, truth_errors
 from odomgraph.errors import CalibrationRejectedError, OdomgraphError
 from odomgraph.estimators.registry import Method, check_option_names, parse_method
 from odomgraph.estimators.registry import run as _run
@@ -271,12 +271,12 @@ def _estimate_checked(log: Log, method: Method, schedule: Schedule, progress, op
     from odomgraph.analysis.mounting import mounting_warnings
     from odomgraph.errors import EstimatorDivergedError
     motion: dict[str, float] = {}
-    wheel_f = None
+    rows: dict[str, float] = {}
     if fit_noise:
-        from odomgraph.analysis.noise import motion_scales, wheel_row_scale, widened_motion, widened_wheels
-        # the wheel rows' own noise first: the motion's measure takes it out of the speeds' steps
-        wheel_f = wheel_row_scale(log)
-        log = widened_wheels(log, wheel_f)
+        from odomgraph.analysis.noise import motion_scales, row_scales, widened_motion, widened_rows
+        # the wheel rows' and gyro samples' own noise first: the motion's measure takes it out of the speeds' steps
+        rows = row_scales(log)
+        log = widened_rows(log, rows)
         motion = motion_scales(log)
         log = widened_motion(log, motion)
     def run(schedule: Schedule, options: dict) -> tuple[Estimate, dict]:
@@ -345,11 +345,13 @@ def _estimate_checked(log: Log, method: Method, schedule: Schedule, progress, op
     suspect += gyro_offset_warnings(log)
     # both references off alike: the wheels' stamps are, and one line says so in place of theirs
     suspect = without_reference_clocks(suspect + wheels_late_lines(suspect))
+    # the EKF's innovations (the smoothers keep none): stream says the same of its own
     suspect += _gap_warnings(est, log, options) + _revision_warnings(est) + lost_tick_warnings(log)
+    suspect += nis_warnings(est)
     est.warnings += [w for w in suspect if w not in est.warnings] + _window_warnings(est, log, schedule)
     est.flags += suspect
     _note_motion_scales(est, log, motion)
-    _note_wheel_scale(est, log, wheel_f)
+    _note_row_scales(est, log, rows)
     return est
 
 
@@ -463,19 +465,32 @@ def _note_motion_scales(est: Estimate, log: Log, motion: dict[str, float]) -> No
                                 "it back)")
 
 
-def _note_wheel_scale(est: Estimate, log: Log, f: float | None) -> None:
-    """Record the wheel_speeds rows' scatter (analysis.noise.wheel_row_scale)
-    in ``est.noise_scales["encoders"]``, with a warning when it was applied.
-    ``log`` is the widened log the estimate ran on."""
-    if f is None:
-        return
-    from odomgraph.analysis.noise import WHEEL_WIDEN_ABOVE
-    applied = f if f > WHEEL_WIDEN_ABOVE else 1.0
-    est.noise_scales["encoders"] = {"measured": f, "applied": applied}
-    if applied > 1.0:
-        a, b = log.robot.encoder_sigma
-        est.warnings.append(
-            f"wheel_speeds: consecutive rows scatter {f:.2g}x more than robot.toml's [encoders] sigma "
+def _note_row_scales(est: Estimate, log: Log, scales: dict[str, float]) -> None:
+    """Record the wheel rows' and gyro samples' scatter (analysis.noise.
+    row_scales) in ``est.noise_scales["encoders"]`` and ``["gyro"]``, with
+    a warning for each one applied. ``log`` is the widened log the estimate
+    ran on."""
+    from odomgraph.analysis.noise import GYRO_WIDEN_ABOVE, WHEEL_WIDEN_ABOVE
+    for sensor, f in scales.items():
+        applied = f if f > (WHEEL_WIDEN_ABOVE if sensor == "encoders" else GYRO_WIDEN_ABOVE) else 1.0
+        est.noise_scales[sensor] = {"measured": f, "applied": applied}
+        if applied > 1.0:
+            est.warnings.append(_row_scale_line(sensor, log, f))
+
+
+def _row_scale_line(sensor: str, log: Log, f: float) -> str:
+    """The warning for a sensor's sigma widened ``f`` times (log: widened)."""
+    if sensor == "gyro":
+        g = log.robot.gyro_sigma
+        return (f"gyro: consecutive samples scatter {f:.2g}x more than robot.toml's [gyro] sigma ({g / f:.3g} "
+                f"rad/s) says: it was widened to {g:.3g} rad/s for this run (calibrate writes it back)")
+    a, b = log.robot.encoder_sigma
+    if log.encoders is not None:
+        return (f"encoders: consecutive rows' speeds scatter more than robot.toml's [encoders] sigma "
+                f"({a / f:.3g} m/s + {b / f:.3g} |v|) and the ticks' quantisation say: the wheels' noise fits "
+                f"{f:.2g}x that sigma, and it was widened to ({a:.3g}, {b:.3g}) for this run (calibrate writes "
+                "it back)")
+    return (f"wheel_speeds: consecutive rows scatter {f:.2g}x more than robot.toml's [encoders] sigma "
             f"({a / f:.3g} m/s + {b / f:.3g} |v|) says (speeds differenced from quantised wheel positions carry "
             f"noise that grows with the rate): it was widened to ({a:.3g}, {b:.3g}) for this run (calibrate "
             "writes it back)")
@@ -924,9 +939,9 @@ def tune_process_noise(log: Log, schedule: Schedule, method: Method = Method.bat
     # that the table holds the intensities that actually ran.
     floor = base
     if options.get("fit_noise", True):
-        from odomgraph.analysis.noise import motion_scales, wheel_row_scale, widened_motion, widened_wheels
-        # measured as estimate measures it: after the wheel speeds' own scatter is widened
-        wl = widened_wheels(log, wheel_row_scale(log))
+        from odomgraph.analysis.noise import motion_scales, row_scales, widened_motion, widened_rows
+        # measured as estimate measures it: after the wheels' and the gyro's own scatter is widened
+        wl = widened_rows(log, row_scales(log))
         floor = widened_motion(wl, motion_scales(wl)).robot.process
     sensor = "gps" if held.gps is not None else "ranges"
     table, tried, errors, used = [], set(), [], []
@@ -1104,11 +1119,11 @@ def _gyro_scale(log: Log, est: Estimate, schedule: Schedule, options: dict) -> d
     1 + STEP, on the noise model ``est`` fitted. Returns {"value", "sigma",
     "determined", "corrected", "sensitivity" (3,) d scale / d g, "line"}."""
     from odomgraph.analysis import gyroscale as G
-    from odomgraph.analysis.noise import widened, widened_wheels
+    from odomgraph.analysis.noise import widened, widened_rows
     # (not a filter's widening from its predictions: it is the run's, not the sensor's; analysis.noise.measured_from)
     fitted = widened(log, {k: v["applied"] for k, v in est.noise_scales.items() if v.get("from") != "predictions"})
-    # and the wheel speeds' own scatter (a second read: the profile ran them at the narrow sigma)
-    fitted = widened_wheels(fitted, est.noise_scales.get("encoders", {}).get("applied"))
+    # and the wheels' and gyro's own scatter (a second read: the profile ran them at the narrow sigma)
+    fitted = widened_rows(fitted, {k: est.noise_scales.get(k, {}).get("applied") for k in ("encoders", "gyro")})
     if est.time_offsets.get("gps"):
         # the GPS clock the run estimated (a clock off moves the fixes along the path: every turn with it)
         fitted = fitted.with_(robot=fitted.robot.with_(gps_time_offset=est.time_offsets["gps"]["value"]))
@@ -1227,7 +1242,7 @@ def _calibration_checks(log: Log, est: Estimate, k, sk, method: Method, schedule
 def _with_fitted_noise(robot, est: Estimate, warnings: list, per_fix_gps: bool = False):
     """The robot with each GPS/range sigma widened by the scale the data asked
     for (pipeline._with_noise_scales), the wheel speeds' [encoders] sigma
-    (_note_wheel_scale), and each velocity random-walk intensity ([process]
+    and the gyro's (_note_row_scales), and each velocity random-walk intensity ([process]
     accel, yaw_accel; _note_motion_scales): calibrate writes them back.
     ``per_fix_gps``: gps.csv has its own sigma column, which robot.toml's gps
     sigma does not stand for (LOG_FORMAT), so that one is left as it is; so
@@ -1245,8 +1260,11 @@ def _with_fitted_noise(robot, est: Estimate, warnings: list, per_fix_gps: bool =
         if f > 1.0:
             robot = robot.with_(**{field_name: getattr(robot, field_name) * f})
     f = est.noise_scales.get("encoders", {}).get("applied", 1.0)
-    if f > 1.0:                        # wheel_speeds.csv rows' scatter (_note_wheel_scale)
+    if f > 1.0:                        # the wheel rows' scatter (_note_row_scales)
         robot = robot.with_(encoder_sigma=tuple(v * f for v in robot.encoder_sigma))
+    f = est.noise_scales.get("gyro", {}).get("applied", 1.0)
+    if f > 1.0:                        # the gyro samples' scatter (_note_row_scales)
+        robot = robot.with_(gyro_sigma=robot.gyro_sigma * f)
     from dataclasses import replace
     pn = robot.process
     grown = {k: getattr(pn, k) * est.noise_scales[k]["applied"] for k in ("accel", "yaw_accel")

@@ -302,3 +302,46 @@ def test_the_import_s_warnings_stay_with_the_log(sim, tmp_path):
     (tmp_path / "log" / "import.json").unlink()
     (tmp_path / "log" / "import.json").mkdir()
     assert read_log(tmp_path / "log").warnings == ("import.json: not an import record (is not a file); ignored",)
+
+
+def test_unset_header_stamps_are_dropped_on_a_real_clock(sim, tmp_path):
+    """A probe: two JointState messages stamped 0 s (a driver publishing
+    before its clock is set) in a bag on a real clock made the log "span
+    8.5e+08 s, more than a year", and the message named neither the topic nor
+    the stamps; five such IMU messages did the same to gyro.csv. Now they are
+    dropped with a note naming the topic, and the rest import as the clean
+    bag's. On a simulated clock (use_sim_time, from 0) a stamp of 0 s is kept."""
+    T0 = 1_700_000_000.0
+    e = sim.encoders
+    real = _imp(_bag(tmp_path / "real", sim, stamp=lambda t: T0 + t))
+    # the first two wheel messages and every other sensor's before them are unset
+    unset = _imp(_bag(tmp_path / "unset", sim, stamp=lambda t: 0.0 if t < e.t[2] else T0 + t))
+    n_fix, n_imu = int((sim.gps.t < e.t[2]).sum()), int((sim.gyro.t < e.t[2]).sum())
+    assert any(f"/joint_states: 2 of {len(e.t)} messages with an unset header stamp (0 s) dropped" in n
+               for n in unset.notes)
+    assert any(f"/imu: {n_imu} of {len(sim.gyro.t)} messages with an unset" in n for n in unset.notes)
+    assert (n_fix == 0) == (not any(n.startswith("/fix:") and "unset" in n for n in unset.notes))
+    assert unset.t_origin == real.t_origin
+    # the speeds of the intervals between set stamps are the real-clock bag's, to the bit
+    np.testing.assert_array_equal(unset.wheel_speeds.t, real.wheel_speeds.t[2:])
+    np.testing.assert_array_equal(unset.wheel_speeds.v_left, real.wheel_speeds.v_left[2:])
+    np.testing.assert_array_equal(unset.gyro.t, real.gyro.t[n_imu:])
+    # a simulated clock from 0: the message at 0 s is a reading like any other
+    simclock = _imp(_bag(tmp_path / "sim", sim, stamp=lambda t: t - e.t[0]))
+    assert len(simclock.wheel_speeds.t) == len(e.t) - 1 and not any("unset" in n for n in simclock.notes)
+    # every wheel message unset on a real clock: the equal-stamp refusal, with its hint
+    with pytest.raises(LogFormatError, match="same header stamp; --stamps receive"):
+        _imp(_bag(tmp_path / "all", sim, stamp=lambda t: 0.0 if t < 100.0 else T0 + t,
+                  fix_stamp=lambda t: T0 + t))
+
+
+def test_wheel_topics_are_refused_by_whole_words_of_their_names():
+    """NOT_WHEELS matched substrings: "/volksbot/odom" was refused as visual
+    odometry ("vo"). Whole words, trailing digits dropped."""
+    from odomgraph.io.importers.rosbag import _not_wheels
+    for fused in ("/odometry/filtered", "/ekf_odom", "/ekf2/odom", "/odom_fused", "/vo", "/camera/vio/odom",
+                  "/rtabmap/visual_odometry", "/odometry/gps", "/global_odom", "/SLAM/odom"):
+        assert _not_wheels(fused), fused
+    for wheels in ("/volksbot/odom", "/odom", "/wheel/odom", "/diff_drive_controller/odom", "/mobile_base/odom",
+                   "/voyager/odom", "/ekfbot/odom", "/rover2/wheel_odom"):
+        assert not _not_wheels(wheels), wheels

@@ -99,6 +99,30 @@ def nis_summary(est: Estimate) -> dict[str, dict[str, float]]:
             for k, v in est.innovations.items() if v.nis.size}
 
 
+#: A sensor's mean NIS beyond this many times its dimension, over at least
+#: NIS_MIN_COUNT updates: the estimate's sigma understates its error. The
+#: simulator's logs, clean and with every fault of analysis.faults, give the
+#: EKF a mean NIS / dimension of 0.03-1.02 per sensor.
+NIS_WARN = 3.0
+NIS_MIN_COUNT = 100
+
+
+def nis_warning(sensor: str, total: float, n: int, dof: int) -> str | None:
+    """The warning for a sensor whose ``n`` accepted updates summed ``total``
+    NIS (dimension ``dof``) when their mean is above NIS_WARN x dof; else None.
+    One text for estimate's EKF and the stream."""
+    if n < NIS_MIN_COUNT or total / n <= NIS_WARN * dof:
+        return None
+    return (f"{sensor}: mean NIS {total / n:.1f} over {n} updates, expected {dof}: the estimate's sigma "
+            "understates its error (a clock off, a sigma too small?)")
+
+
+def nis_warnings(est: Estimate) -> list[str]:
+    """nis_warning of each sensor in ``est.innovations`` (the EKF's)."""
+    out = (nis_warning(k, float(np.sum(v.nis)), int(v.nis.size), int(v.dof)) for k, v in est.innovations.items())
+    return [w for w in out if w]
+
+
 def pose_at(est: Estimate, t: np.ndarray) -> np.ndarray:
     """(M, 3) estimated (x, y, theta) at times t inside the estimate's span, by linear
     interpolation (heading unwrapped first, so it does not jump at +-pi)."""

@@ -191,50 +191,167 @@ def widened_motion(log, scales: dict[str, float]):
 #: simulator's quantised speeds measured 1.10-1.17 at 10 Hz, the libRSF
 #: cut's wheels 1.32 at 7.8 Hz, quantised ones at 50-200 Hz 1.4-8.8.
 WHEEL_WIDEN_ABOVE = 1.5
-#: Rows further apart than this many median periods end a run of rows (wheel_row_scale).
+#: Encoder rows whose plain whitened scatter (eq. 41 and the ticks'
+#: quantisation at robot.toml's sigma) is above this have the factor on the
+#: sigma solved for (wheel_row_scale); below, the plain scatter is returned.
+#: Rows at the configured sigma measure 1.0-1.12 in the simulator (10-100 Hz,
+#: paper and yard); where quantisation dominates (yard at 100 Hz) the small
+#: excess the motion adds would otherwise be solved into a factor of 1.7-1.9.
+ENCODER_SCATTER_ABOVE = 1.25
+#: A gyro's sample scatter this far above robot.toml's [gyro] sigma is acted on (gyro_row_scale).
+GYRO_WIDEN_ABOVE = 1.5
+#: Rows further apart than this many median periods end a run of rows (wheel_row_scale, gyro_row_scale).
 WHEEL_MAX_GAP = 2.0
 
 
 def wheel_row_scale(log) -> float | None:
     """The factor by which robot.toml's [encoders] sigma (paper eq. 41,
-    a + b |v|) would have to grow to match the scatter of the
-    wheel_speeds.csv rows (1: right); None for encoders.csv (whose rows
-    carry their tick quantisation: factors.encoder.speed_sigma) or fewer
+    a + b |v|) would have to grow to match the scatter of the wheels' rows
+    (about 1: right), from wheel_speeds.csv or encoders.csv; None for fewer
     than MIN_COUNT triplets of moving rows.
 
     Measured from the log alone, before any estimate: the second
     difference v[k+1] - 2 v[k] + v[k-1] of each wheel's rows leaves little
-    of a speed that changes smoothly (nothing of a constant acceleration)
-    and, of white noise sigma_k, the variance sigma_{k-1}^2 + 4 sigma_k^2 +
-    sigma_{k+1}^2. The robust scale (MAD) of the differences whitened so,
-    over triplets with no gap and a wheel moving. Wheel speeds an importer
-    differenced from a JointState's quantised positions (or a driver's own
-    Odometry twist) carry noise that grows as the rate: a probe's 100 Hz
-    rows scattered 2-4x the configured sigma, and the EKF, weighing each
-    row whole, gave a track scale 0.005 off at z -3.2, status ok (at 200
-    Hz it diverged)."""
-    from odomgraph.estimators.measurements import clean
-    w = log.wheel_speeds
-    if log.encoders is not None or w is None or len(w.t) < MIN_COUNT + 2:
+    of a speed that changes smoothly (nothing of a constant acceleration).
+    Its variance, of eq. 41's white noise sigma_k, is sigma_{k-1}^2 +
+    4 sigma_k^2 + sigma_{k+1}^2 (S); encoder rows add the ticks'
+    quantisation (_quantisation_var, Q). The factor g solves
+    MAD(d2 / sqrt(g^2 S + Q)) = 1 (robust scale, over triplets with no gap
+    and a wheel moving); it is returned when the plain scatter
+    MAD(d2 / sqrt(S + Q)) exceeds ENCODER_SCATTER_ABOVE, else that scatter
+    (for wheel_speeds rows, Q = 0, the two are one number).
+
+    Wheel speeds an importer differenced from a JointState's quantised
+    positions (or a driver's own Odometry twist) carry noise that grows as
+    the rate: a probe's 100 Hz rows scattered 2-4x the configured sigma,
+    and the EKF, weighing each row whole, gave a track scale 0.005 off at
+    z -3.2, status ok (at 200 Hz it diverged). Encoder rows with wheel
+    noise 5-10x robot.toml's sigma gave batch scale factors 5-9 sigma off,
+    status ok (a probe); the quantisation, which the estimators model,
+    must not count against the sigma: with it the simulator's rows at the
+    configured sigma measure 1.0-1.12, and g finds 2, 5 and 10 for noise
+    2, 5 and 10 times it (tests/test_wheel_speed_noise.py)."""
+    from odomgraph.estimators.measurements import despike
+    if log.encoders is None and (log.wheel_speeds is None or len(log.wheel_speeds.t) < MIN_COUNT + 2):
         return None
-    w = clean(log)[0].wheel_speeds
+    if log.encoders is not None and len(log.encoders.t) < MIN_COUNT + 3:
+        return None
+    # the wheels' own rows, as every estimator reads them (the gyro's spikes do not matter here)
+    clean = despike(log.with_(gyro=None))[0]
     a, b = log.robot.encoder_sigma
-    dt = np.diff(w.t)
-    if dt.size < 2:
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        # rows written twice (dt 0) make non-finite speeds, left out (np.isfinite)
+        return _row_scale(clean, a, b)
+
+
+def _row_scale(clean, a: float, b: float) -> float | None:
+    """wheel_row_scale's measure on the despiked log ``clean``."""
+    r = clean.robot
+    d2s, ss, qs = [], [], []
+    if clean.encoders is not None:
+        e = clean.encoders
+        dt = np.diff(e.t)
+        rows = []
+        for ticks, tpm in ((e.ticks_left, r.ticks_per_meter_left), (e.ticks_right, r.ticks_per_meter_right)):
+            c = 1.0 / (tpm * dt)                # m/s per tick, each interval
+            rows.append((ticks[1:] * c, ticks[1:] != 0, _quantisation_var(c)))
+    else:
+        w = clean.wheel_speeds
+        dt = np.diff(w.t)
+        rows = [(v, v != 0, 0.0) for v in (w.v_left, w.v_right)]
+    if dt.size < 3:
         return None
     med = float(np.median(dt))
-    ok = (dt[1:] <= WHEEL_MAX_GAP * med) & (dt[:-1] <= WHEEL_MAX_GAP * med)
-    z = []
-    for v in (w.v_left, w.v_right):
+    gap_ok = dt <= WHEEL_MAX_GAP * med
+    if clean.encoders is not None:
+        ok = gap_ok[2:] & gap_ok[1:-1] & gap_ok[:-2]     # the rows' own intervals
+    else:
+        ok = gap_ok[1:] & gap_ok[:-1]                   # between the rows
+    for v, moving, q in rows:
         s2 = (a + b * np.abs(v)) ** 2
         d2 = v[2:] - 2.0 * v[1:-1] + v[:-2]
-        var = s2[2:] + 4.0 * s2[1:-1] + s2[:-2]
-        sel = ok & ((v[2:] != 0) | (v[1:-1] != 0) | (v[:-2] != 0)) & np.isfinite(d2)
-        z.append(d2[sel] / np.sqrt(var[sel]))
-    z = np.concatenate(z)
-    if z.size < MIN_COUNT:
+        sel = ok & (moving[2:] | moving[1:-1] | moving[:-2]) & np.isfinite(d2) & np.isfinite(q)
+        d2s.append(d2[sel])
+        ss.append((s2[2:] + 4.0 * s2[1:-1] + s2[:-2])[sel])
+        qs.append(np.broadcast_to(q, d2.shape)[sel])
+    d2, s, q = np.concatenate(d2s), np.concatenate(ss), np.concatenate(qs)
+    if d2.size < MIN_COUNT:
         return None
-    return float(1.4826 * np.median(np.abs(z)))
+    ad = np.abs(d2)
+
+    def scatter(g: float) -> float:
+        return float(1.4826 * np.median(ad / np.sqrt(g * g * s + q)))
+    plain = scatter(1.0)
+    if plain <= ENCODER_SCATTER_ABOVE or not np.any(q > 0) or not np.any(s > 0):
+        return plain     # no quantisation: plain is the factor itself (scatter(g) = plain / g)
+    # scatter(g) falls as g grows; bisect in log g on [1, 1e4]
+    lo, hi = 1.0, 1e4
+    for _ in range(50):
+        mid = np.sqrt(lo * hi)
+        lo, hi = (mid, hi) if scatter(mid) > 1.0 else (lo, mid)
+    return float(hi)
+
+
+def _quantisation_var(c: np.ndarray) -> np.ndarray:
+    """(K - 2,) variance [(m/s)^2] of the second difference of speeds from
+    tick counts, from the counts' quantisation alone. ``c`` (K,) is each
+    interval's m/s per tick, 1 / (tpm dt). The count of interval k is the
+    distance plus e_k - e_{k-1}, e the floor() error of the cumulative
+    count (uniform, variance 1/12 tick^2): neighbouring intervals share one,
+    so v[k+1] - 2 v[k] + v[k-1] carries e_{k+1} c_{k+1} - e_k (c_{k+1} +
+    2 c_k) + e_{k-1} (2 c_k + c_{k-1}) - e_{k-2} c_{k-1} (20/12 tick^2 at
+    one rate, not the (1 + 4 + 1) / 6 of independent intervals that
+    factors.encoder.speed_sigma's per-row 1/6 would give)."""
+    c0, c1, c2 = c[:-2], c[1:-1], c[2:]
+    return (c2**2 + (c2 + 2.0 * c1) ** 2 + (2.0 * c1 + c0) ** 2 + c0**2) / 12.0
+
+
+def gyro_row_scale(log) -> float | None:
+    """The factor by which robot.toml's [gyro] sigma (paper eq. 40, white
+    noise on each sample [rad/s]) would have to grow to match the scatter
+    of the gyro's samples (about 1: right); None without a gyro or with
+    fewer than MIN_COUNT triplets.
+
+    As wheel_row_scale: the second difference of the despiked samples,
+    with variance 6 sigma^2, robust scale (MAD), over triplets with no gap.
+    The yaw rate's own changes hardly enter at a gyro's rates: the
+    simulator's samples measure 0.96-1.22 at 10-400 Hz (the most at 10 Hz),
+    2.9 and 9.7 for noise 3 and 10 times the sigma; the Jackal's IMU 1.05. A gyro 10x noisier than its
+    sigma gave the EKF a mean gyro NIS 5.4 and batch a track scale at z
+    3.5, status ok (tests/test_wheel_speed_noise.py). A gyro that filters
+    its samples (a low-pass inside the IMU) measures less: never narrowed."""
+    from odomgraph.estimators.measurements import despike
+    if log.gyro is None or len(log.gyro.t) < MIN_COUNT + 2 or not log.robot.gyro_sigma > 0:
+        return None
+    g = despike(log.with_(encoders=None, wheel_speeds=None))[0].gyro
+    dt = np.diff(g.t)
+    if dt.size < 2:
+        return None
+    gap_ok = dt <= WHEEL_MAX_GAP * float(np.median(dt))
+    d2 = (g.omega[2:] - 2.0 * g.omega[1:-1] + g.omega[:-2])[gap_ok[1:] & gap_ok[:-1]]
+    d2 = d2[np.isfinite(d2)]
+    if d2.size < MIN_COUNT:
+        return None
+    return float(1.4826 * np.median(np.abs(d2)) / (np.sqrt(6.0) * log.robot.gyro_sigma))
+
+
+def row_scales(log) -> dict[str, float]:
+    """{"encoders": wheel_row_scale, "gyro": gyro_row_scale} of the log, the
+    ones it can measure: each sensor's scatter against robot.toml's sigma,
+    from the rows alone (before any estimate)."""
+    out = {"encoders": wheel_row_scale(log), "gyro": gyro_row_scale(log)}
+    return {k: v for k, v in out.items() if v is not None}
+
+
+def widened_rows(log, scales: dict[str, float | None]):
+    """The log with robot.toml's [encoders] and [gyro] sigma multiplied by
+    their ``scales`` (row_scales, or the factors a run applied) where they
+    are above WHEEL_WIDEN_ABOVE / GYRO_WIDEN_ABOVE (never narrowed)."""
+    log = widened_wheels(log, scales.get("encoders"))
+    f = scales.get("gyro")
+    if f is not None and f > GYRO_WIDEN_ABOVE:
+        log = log.with_(robot=log.robot.with_(gyro_sigma=log.robot.gyro_sigma * f))
+    return log
 
 
 def widened_wheels(log, f: float | None):

@@ -31,6 +31,7 @@ digit, and the files written carry the absolute stamps.
 """
 from __future__ import annotations
 
+import re
 import shutil
 import tempfile
 from contextlib import contextmanager
@@ -51,8 +52,11 @@ IMU_TYPE, GPS_TYPE, TF_TYPE = "sensor_msgs/msg/Imu", "sensor_msgs/msg/NavSatFix"
 #: Bare integer tick counters (std_msgs), with the width at which they wrap (None: never).
 TICK_TYPES = {"std_msgs/msg/Int16": 16, "std_msgs/msg/UInt16": 16, "std_msgs/msg/Int32": 32,
               "std_msgs/msg/UInt32": 32, "std_msgs/msg/Int64": None, "std_msgs/msg/UInt64": None}
-#: Topic names that are never picked as wheels by themselves: fused, not wheel, odometry.
-NOT_WHEELS = ("filtered", "ekf", "fused", "global", "gps", "visual", "vo", "slam")
+#: Words of topic names that are never picked as wheels by themselves: fused, not wheel, odometry.
+#: Matched against whole words of the name (a probe: "/volksbot/odom" was refused for "vo").
+NOT_WHEELS = ("filtered", "ekf", "fused", "global", "gps", "visual", "vo", "vio", "slam")
+#: The stamp given to a message whose header stamp is unset (0 s 0 ns) while it is read.
+UNSET = -np.inf
 AXES = ("x", "y", "z")
 #: The robot's own frame, as ROS names it (REP 105).
 BASE_FRAMES = ("base_link", "base_footprint")
@@ -130,6 +134,29 @@ def _increasing(t: np.ndarray, *cols):
     t = t[order]
     keep = np.concatenate([[True], np.diff(t) > 0])
     return (t[keep], *(c[order][keep] for c in cols))
+
+
+def _not_wheels(topic: str) -> bool:
+    """True when a word of the topic's name (split at "/", "_", "-" and the
+    like; trailing digits dropped, so "ekf2" is "ekf") says it is not the
+    wheels' own odometry."""
+    words = (w.rstrip("0123456789") for w in re.split(r"[^a-z0-9]+", topic.lower()))
+    return any(w in NOT_WHEELS for w in words)
+
+
+def _drop_unset(topic: str, rows: list, real_clock: bool, notes: list) -> None:
+    """Rows whose header stamp was 0 s (stamp UNSET, first element) are
+    dropped with a note when the bag runs on a real clock and the topic has
+    others; on a simulated clock (use_sim_time, from 0) 0 s is a stamp like
+    any other. When every message was unset they all take one stamp, so that
+    the equal-stamp checks refuse or leave out the sensor with the
+    --stamps receive hint. In place."""
+    unset = sum(1 for r in rows if r[0] == UNSET)
+    if unset and unset < len(rows) and real_clock:
+        rows[:] = [r for r in rows if r[0] != UNSET]
+        notes.append(f"{topic}: {unset} of {unset + len(rows)} messages with an unset header stamp (0 s) dropped")
+    elif unset:
+        rows[:] = [(0.0, *r[1:]) if r[0] == UNSET else r for r in rows]
 
 
 def _candidates(conns) -> dict[str, list]:
@@ -245,7 +272,7 @@ def _pick(cands: dict[str, list]) -> dict[str, str | None]:
     for role, cs in cands.items():
         cs = list(cs)
         if role == "wheels":
-            cs = [c for c in cs if not any(w in c.topic.lower() for w in NOT_WHEELS)]
+            cs = [c for c in cs if not _not_wheels(c.topic)]
             joints = [c for c in cs if WHEEL_TYPES[c.msgtype] == "joints"]
             cs = joints if len(joints) == 1 else cs
         topics = sorted({c.topic for c in cs})
@@ -478,12 +505,17 @@ def import_rosbag(bag: Path | str, wheel_topic: str | None = None, left_joint: s
             for conn, t_rx, raw in reader.messages(connections=use):
                 msg = reader.deserialize(raw, conn.msgtype)
                 ns = int(t_rx) if stamps == "receive" or conn.topic in ticks else _stamp_ns(msg)
-                if origin_ns is None:
-                    # A real clock counts from the first whole second (Log.t_origin): the
-                    # difference of integer nanoseconds is exact, and so is every interval.
-                    whole = ns // 1_000_000_000
-                    origin_ns = whole * 1_000_000_000 if whole >= ORIGIN_ABOVE else 0
-                stamp = 1e-9 * (ns - origin_ns)
+                if ns == 0:
+                    # a driver's unset header (a probe: two such wheel messages made the log span
+                    # 27 years); _drop_unset decides once the topic is read
+                    stamp = UNSET
+                else:
+                    if origin_ns is None:
+                        # A real clock counts from the first whole second (Log.t_origin): the
+                        # difference of integer nanoseconds is exact, and so is every interval.
+                        whole = ns // 1_000_000_000
+                        origin_ns = whole * 1_000_000_000 if whole >= ORIGIN_ABOVE else 0
+                    stamp = 1e-9 * (ns - origin_ns)
                 if conn.topic == chosen["wheels"]:
                     if kind == "joints":
                         # the joints are chosen once the topic is read (_joint_rows): another
@@ -527,6 +559,9 @@ def import_rosbag(bag: Path | str, wheel_topic: str | None = None, left_joint: s
         raise
     except Exception as exc:  # rosbags raises its own types for unreadable bags
         raise _unreadable(bag, exc) from None
+    for topic, rows in ((chosen["wheels"], joint_msgs if kind == "joints" else wheels), (chosen["gps"], fixes),
+                        (chosen["imu"], rates)):
+        _drop_unset(topic, rows, bool(origin_ns), notes)
     if kind == "joints":
         wheels = _joint_rows(bag, chosen["wheels"], joint_msgs, left_joint, right_joint, notes, not_finite)
     if null_island:
