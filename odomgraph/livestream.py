@@ -15,7 +15,7 @@ import time
 from dataclasses import dataclass
 from typing import IO, Iterable
 
-from odomgraph.errors import OdomgraphError
+from odomgraph.errors import EstimatorDivergedError, OdomgraphError
 from odomgraph.io.stream import HEADER, LineError, parse_line, row_line
 from odomgraph.online import Online, StreamInputError
 
@@ -100,6 +100,9 @@ def run_stream(online: Online, lines: Iterable[str], out: IO[str], err: IO[str],
                 if wait > 0:
                     time.sleep(wait)
             rows = online.push(sensor, stamp, *values)       # the text: a real clock's stamp read exactly
+        except EstimatorDivergedError as exc:
+            emit(getattr(exc, "rows_before", []))     # the rows given before the stream gave up
+            raise
         except (LineError, StreamInputError) as exc:
             st.skipped_bad += 1
             if st.skipped_bad <= SAY_BAD_LINES:
@@ -120,7 +123,12 @@ def run_stream(online: Online, lines: Iterable[str], out: IO[str], err: IO[str],
         online.lines_read = st.lines
         online.save(checkpoint)
         st.checkpoints += 1
-    emit(online.close())
+    try:
+        rows = online.close()
+    except EstimatorDivergedError as exc:
+        emit(getattr(exc, "rows_before", []))
+        raise
+    emit(rows)
     if st.skipped_bad > SAY_BAD_LINES:
         err.write(f"odomgraph: {source}: {st.skipped_bad - SAY_BAD_LINES} more bad lines skipped\n")
     return st

@@ -77,6 +77,10 @@ AHEAD_ROWS = SPIKE_HALF + 1
 #: A sensor whose newest row is this much older than the newest data [s] has
 #: stopped (a dropout): the filter no longer waits for its rows ahead.
 STOPPED_AFTER = 1.0
+#: A sensor's measurements rejected as older than the latency window: at this
+#: many the stream says so at once (a probe: GPS lines 0.4 s behind under
+#: --latency 0.25 were every one rejected, said only in the end's summary).
+LATE_SAY = 5
 #: A stamp this far [s] past the newest is held, not taken as the new time,
 #: until another sensor's confirm it (a whole system that paused): one stray
 #: stamp (a driver's garbage, a sensor whose clock runs ahead) would else make
@@ -233,6 +237,7 @@ class Online:
         self._gyro_top: tuple | None = None  # (t, omega) of the largest |rate| so far (the rail test's)
         self._nis = {}                      # sensor -> [sum of accepted NIS, count, dimension]
         self.alerts: list[str] = []         # warnings said as they arise (odomgraph stream prints them)
+        self._late_by: dict[str, float] = {}    # sensor -> the most [s] a rejected late measurement was behind
         self._settle_said = 0
         self._fail_t = None                 # time of the event being filtered (a divergence's)
         # The estimator started with no absolute measurement and no [initial]
@@ -255,6 +260,20 @@ class Online:
         if self.robot.initial is None:
             w = max(w, CONSENSUS_WINDOW + WARMUP_MARGIN)
         return w
+
+    def _late(self, sensor: str, t: float) -> None:
+        """Count a measurement older than the latency window, and say it once
+        per sensor when LATE_SAY have come (how far behind the newest)."""
+        _Counts.add(self.counts.late, sensor)
+        by = getattr(self, "_late_by", None)       # (a checkpoint written before it existed)
+        if by is None:
+            by = self._late_by = {}
+        by[sensor] = max(by.get(sensor, 0.0), self.t_newest - t)
+        if self.counts.late[sensor] == LATE_SAY:
+            self.alerts.append(
+                f"{sensor}: {LATE_SAY} measurements came older than the {self.latency:g} s latency window (up to "
+                f"{by[sensor]:.2f} s behind the newest stamp) and were rejected; more are counted in the summary: "
+                "a sensor this late needs a larger --latency, or its clock is behind")
 
     def _row(self, t: float, mean: np.ndarray, sigma: np.ndarray, pose_cov) -> OnlineRow:
         """An output row; its scale factors against robot.toml's (a restart carries them in the robot)."""
@@ -290,7 +309,7 @@ class Online:
 
     def _accept(self, sensor: str, t: float, vals: tuple) -> list[OnlineRow]:
         if t < self.t_released:
-            _Counts.add(self.counts.late, sensor)
+            self._late(sensor, t)
             return []
         heapq.heappush(self._heap, (t, self._seq, sensor, vals))
         self._seq += 1
@@ -460,13 +479,17 @@ class Online:
             try:
                 return kept + self._advance_once(final)
             except EstimatorDivergedError as exc:
-                if len(self.restarts) >= MAX_RESTARTS:
-                    raise
                 # the rows a live stream would have given before the failing chunk (_filter)
                 done = getattr(exc, "rows_before", [])
                 if done:
+                    self._check_revisions(done)
                     self.last = done[-1]
                 kept += done
+                if len(self.restarts) >= MAX_RESTARTS:
+                    # giving up: the rows of this call so far go with the error (livestream
+                    # writes them before it stops; a second divergence while closing lost them)
+                    exc.rows_before = kept
+                    raise
                 self._restart(exc)
                 if not final:
                     return kept

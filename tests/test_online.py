@@ -234,6 +234,62 @@ def test_a_divergence_at_close_with_nothing_left_keeps_its_rows(monkeypatch):
     assert live.restarts[0].endswith("too few rows were left after it to start again")
 
 
+def test_giving_up_while_closing_writes_the_rows_so_far(monkeypatch):
+    """A second divergence in the same closing call that reaches MAX_RESTARTS
+    raised and dropped the rows kept from the first (a final read). Now the
+    rows before the first failing chunk go with the error: odomgraph stream
+    writes them, then stops with its one line."""
+    import io
+    from odomgraph import online as O
+    from odomgraph.errors import EstimatorDivergedError
+    from odomgraph.estimators import ekf
+    from odomgraph.livestream import run_stream
+    log = simulate(paper(26.0), 27)
+    sch = Schedule(calibrate_until=15.0)
+    _, ref = _stream(log, sch)
+    real = ekf.EKF.step
+
+    def failing(self, t, *args, **kw):
+        if t > 18.0:                       # every engine fails from 18 s on: the restart too
+            raise EstimatorDivergedError(f"diverged on purpose at t={t:.2f} s")
+        return real(self, t, *args, **kw)
+    monkeypatch.setattr(ekf.EKF, "step", failing)
+    monkeypatch.setattr(O, "MAX_RESTARTS", 1)
+    live = Online(log.robot, "ekf", sch)
+    out, err = io.StringIO(), io.StringIO()
+    with pytest.raises(EstimatorDivergedError, match="diverged on purpose"):
+        run_stream(live, log_lines(log), out, err)
+    assert len(live.restarts) == 1
+    written = np.loadtxt(io.StringIO(out.getvalue()), delimiter=",", skiprows=1, ndmin=2)
+    want = [r for r in ref if r.t < 18.0 - live.chunk]
+    # a log shorter than the warm-up runs whole at close: every row given is from that call
+    assert len(written) >= len(want) > 300
+    np.testing.assert_allclose(written[:len(want), 0], [r.t for r in want], atol=1e-6)
+
+
+def test_a_late_sensor_is_said_as_it_happens():
+    """GPS lines 0.4 s behind the others under --latency 0.25 were every one
+    rejected, said only in the summary at the end (a probe, stdin stream).
+    Now the LATE_SAY-th late one is said at once, with how far behind it came."""
+    from odomgraph.online import LATE_SAY as O_LATE
+    log = simulate(paper(30.0), 28)
+    lines = sorted(log_lines(log), key=lambda ln: float(ln.split(",")[1]) + (0.4 if ln.startswith("gps") else 0.0))
+    live = Online(log.robot, "ekf", Schedule(calibrate_until=15.0), latency=0.25)
+    alerts_at = None
+    for k, line in enumerate(lines):
+        sensor, t, values = parse_line(line)
+        live.push(sensor, t, *values)
+        if alerts_at is None and any("latency window" in a for a in live.alerts):
+            alerts_at = k
+    said = [a for a in live.alerts if "latency window" in a]
+    assert len(said) == 1 and said[0].startswith(f"gps: {O_LATE} measurements came older than the 0.25 s latency")
+    assert "up to 0.4" in said[0] or "up to 0.3" in said[0]
+    gps_lines = [k for k, ln in enumerate(lines) if ln.startswith("gps")]
+    assert alerts_at == gps_lines[O_LATE - 1]
+    # all but the few before the first release (nothing was final yet)
+    assert len(gps_lines) - 10 < live.counts.late["gps"] <= len(gps_lines)
+
+
 @pytest.mark.parametrize("method, seed", [("isam2", 19), ("fixed-lag", 21)])
 def test_a_restart_in_the_middle_of_a_slip_keeps_the_calibration(monkeypatch, method, seed):
     """Restarted at 40 s, inside the paper scenario's slip, pose sigma widened:

@@ -345,3 +345,34 @@ def test_wheel_topics_are_refused_by_whole_words_of_their_names():
     for wheels in ("/volksbot/odom", "/odom", "/wheel/odom", "/diff_drive_controller/odom", "/mobile_base/odom",
                    "/voyager/odom", "/ekfbot/odom", "/rover2/wheel_odom"):
         assert not _not_wheels(wheels), wheels
+
+
+def test_tf_static_chains_and_namespaced_frames_are_followed():
+    """/tf_static was read only as a direct base_link -> frame transform: an
+    antenna under base_link -> mast -> gps, or robot1/base_link ->
+    robot1/gps, gave a lever arm of (0, 0) with "no /tf_static for frame"
+    (a probe: batch and EKF z 5.5, degraded, blaming the lever arm). The
+    chain is composed, a namespace is a base frame's too; a loop or a chain
+    that never reaches a base frame gives none."""
+    from odomgraph.io.importers.rosbag import _in_base, _lever_from_tf, _rotation
+    s = np.sqrt(0.5)
+    yaw180, roll180, yaw90 = _rotation(0, 0, 1, 0), _rotation(1, 0, 0, 0), _rotation(0, 0, s, s)
+    eye = np.eye(3)
+    frames = {("base_footprint", "base_link"): ((0.0, 0.0, 0.1), eye),
+              ("base_link", "mast"): ((0.1, 0.0, 0.3), yaw180),       # the mast's x points backwards
+              ("mast", "gps"): ((0.45, 0.05, 0.2), eye),
+              ("base_link", "imu_mount"): ((0.0, 0.0, 0.1), roll180),
+              ("imu_mount", "imu_link"): ((0.0, 0.0, 0.0), yaw90),
+              ("robot1/base_link", "robot1/gps"): ((-0.3, 0.2, 0.5), eye),
+              ("odom", "orphan"): ((1.0, 0.0, 0.0), eye),
+              ("a", "b"): ((0.0, 0.0, 0.0), eye), ("b", "a"): ((0.0, 0.0, 0.0), eye)}
+    notes = []
+    # base_link first: the chain stops at the first base frame up from the antenna
+    assert _lever_from_tf(frames, "gps", notes) == pytest.approx((0.1 - 0.45, -0.05))
+    assert notes[-1] == "GPS lever arm (-0.350, -0.050) m from /tf_static base_link -> mast -> gps"
+    assert _lever_from_tf(frames, "robot1/gps", notes) == pytest.approx((-0.3, 0.2))
+    chain, _, R = _in_base(frames, "imu_link")
+    # the IMU upside down: the robot's up is the IMU's -z
+    assert chain == ["base_link", "imu_mount", "imu_link"] and R[2] == pytest.approx([0.0, 0.0, -1.0])
+    assert _in_base(frames, "orphan") is None and _in_base(frames, "a") is None and _in_base(frames, "nowhere") is None
+    assert _lever_from_tf(frames, "orphan", notes) == (0.0, 0.0) and "not in /tf_static" in notes[-1]

@@ -637,7 +637,8 @@ def import_rosbag(bag: Path | str, wheel_topic: str | None = None, left_joint: s
         if _said_equal_stamps(chosen["imu"], len(g), len(tg), notes, warnings):
             rates = []
     if rates:
-        mount = next((frames[(p, imu_frame)][1] for p in BASE_FRAMES if (p, imu_frame) in frames), None)
+        found = _in_base(frames, imu_frame) if imu_frame else None
+        mount = found[2] if found is not None else None
         if imu_axis == "auto" and mount is not None:
             # The robot's yaw rate is the z row of the rotation into base_link.
             om = mount[2] @ np.stack([wx, wy, wz])
@@ -713,13 +714,39 @@ def _unwrap_angle(x: np.ndarray, topic: str, side: str, notes: list) -> np.ndarr
     return x
 
 
+def _is_base(frame: str) -> bool:
+    """base_link or base_footprint, with or without a namespace ("robot1/base_link")."""
+    return frame.rsplit("/", 1)[-1] in BASE_FRAMES
+
+
+def _in_base(frames, child: str) -> tuple[list[str], np.ndarray, np.ndarray] | None:
+    """(the chain of frames from the robot's base frame down to ``child``,
+    child's origin in it (3,) [m], rotation (3, 3) child -> base) from
+    /tf_static's transforms (``frames``: _static_frames), composed along the
+    chain: p_base = R1 (R2 p + t2) + t1. None when no chain reaches a base
+    frame (a probe: base_link -> mast -> gps gave a lever arm of (0, 0) and
+    "no /tf_static for frame 'gps'"; so did robot1/base_link -> robot1/gps)."""
+    parent_of = {}
+    for (p, c), tr in frames.items():
+        parent_of.setdefault(c, (p, tr))
+    chain, t, R = [child], np.zeros(3), np.eye(3)
+    frame = child
+    while not _is_base(frame):
+        if frame not in parent_of or len(chain) > len(frames):
+            return None               # no parent, or a loop
+        frame, ((x, y, z), Rp) = parent_of[frame][0], parent_of[frame][1]
+        t, R = Rp @ t + np.array([x, y, z]), Rp @ R
+        chain.insert(0, frame)
+    return (chain, t, R) if len(chain) > 1 else None
+
+
 def _lever_from_tf(frames, fix_frame, notes) -> tuple[float, float]:
     """The antenna's (x, y) in base_link from /tf_static, or (0, 0) with a note."""
-    for parent in BASE_FRAMES:
-        v = frames.get((parent, fix_frame), (None,))[0] if fix_frame else None
-        if v is not None:
-            notes.append(f"GPS lever arm ({v[0]:+.3f}, {v[1]:+.3f}) m from /tf_static {parent} -> {fix_frame}")
-            return v[0], v[1]
+    found = _in_base(frames, fix_frame) if fix_frame else None
+    if found is not None:
+        chain, v, _ = found
+        notes.append(f"GPS lever arm ({v[0]:+.3f}, {v[1]:+.3f}) m from /tf_static {' -> '.join(chain)}")
+        return float(v[0]), float(v[1])
     notes.append("GPS lever arm not in /tf_static: taken as (0, 0); give --gps-lever-arm if the antenna is "
                  "off the robot's centre")
     return 0.0, 0.0
