@@ -23,7 +23,8 @@ JOINTS = ["left_wheel_joint", "right_wheel_joint"]
 
 
 def _bag(path: Path, log, order=lambda k: JOINTS, arm_every=0, fix=None, imu_cov=0.0, imu_rate=None,
-         stamp=lambda t: t, positions=True, velocities=False, wrap=False, arm_names=("arm_shoulder", "arm_elbow"), fix_stamp=None):
+         stamp=lambda t: t, positions=True, velocities=False, wrap=False, arm_names=("arm_shoulder", "arm_elbow"), fix_stamp=None,
+         arm_position=(0.1, 0.2)):
     """A ROS 2 bag of ``log``: JointState wheels (joint names per message
     from ``order(k)``; every ``arm_every``-th message an arm's JointState on
     the same topic; ``wrap``: positions modulo 2 pi), NavSatFix (``fix(k, lat, lon, cov)`` may change a fix),
@@ -69,7 +70,7 @@ def _bag(path: Path, log, order=lambda k: JOINTS, arm_every=0, fix=None, imu_cov
             w.write(cj, at(t), ts.serialize_cdr(msg, "sensor_msgs/msg/JointState"))
             if arm_every and k % arm_every == 0:
                 # before the wheels' message of the same time: another publisher may come first
-                arm = JS(header=header(t - 0.001), name=list(arm_names), position=np.array([0.1, 0.2]),
+                arm = JS(header=header(t - 0.001), name=list(arm_names), position=np.array(arm_position, float),
                          velocity=np.array([], float), effort=np.array([], float))
                 w.write(cj, at(t - 0.001), ts.serialize_cdr(arm, "sensor_msgs/msg/JointState"))
         g = log.gps
@@ -376,3 +377,22 @@ def test_tf_static_chains_and_namespaced_frames_are_followed():
     assert chain == ["base_link", "imu_mount", "imu_link"] and R[2] == pytest.approx([0.0, 0.0, -1.0])
     assert _in_base(frames, "orphan") is None and _in_base(frames, "a") is None and _in_base(frames, "nowhere") is None
     assert _lever_from_tf(frames, "orphan", notes) == (0.0, 0.0) and "not in /tf_static" in notes[-1]
+
+
+def test_a_joint_state_publisher_beside_the_driver_is_skipped(sim, clean, tmp_path):
+    """joint_state_publisher sending every joint at 0 on /joint_states beside
+    the wheel driver was interleaved with it: wheels jumping to 0 and back
+    (a probe: batch 1.76 at z +26 blaming an encoder counting backwards, or a
+    refusal naming a 1003 m/s wheel). Its messages are skipped with a note,
+    and the wheels equal the clean bag's; a robot that stands still all
+    along (both publishers constant) is left as it is."""
+    jsp = ("caster_joint", *JOINTS)
+    log = _imp(_bag(tmp_path / "jsp", sim, arm_every=2, arm_names=jsp, arm_position=(0.0, 0.0, 0.0)))
+    np.testing.assert_array_equal(log.wheel_speeds.v_left, clean.wheel_speeds.v_left)
+    np.testing.assert_array_equal(log.wheel_speeds.v_right, clean.wheel_speeds.v_right)
+    k = (len(sim.encoders.t) + 1) // 2
+    assert any(n.startswith(f"/joint_states: {k} messages from another publisher") for n in log.notes)
+    # a driver that publishes velocities only, beside the publisher's positions: its velocities are used
+    vel = _imp(_bag(tmp_path / "jspv", sim, positions=False, velocities=True, arm_every=3, arm_names=jsp,
+                    arm_position=(0.0, 0.0, 0.0)))
+    assert len(vel.wheel_speeds.t) == len(sim.encoders.t) and np.ptp(vel.wheel_speeds.v_left) > 0.5

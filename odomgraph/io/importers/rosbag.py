@@ -348,6 +348,34 @@ def _wheel_joints(bag: Path, topic: str, names: list[str], left: str | None, rig
                               "give --left-joint and --right-joint")
 
 
+def _publisher(msg: tuple) -> tuple:
+    """What tells two JointState publishers on one topic apart: the names,
+    and whether positions and velocities are filled."""
+    _, names, pos, vel = msg
+    return names, pos.size == len(names), vel.size == len(names)
+
+
+def _frozen_publishers(msgs: list, joints: tuple[str, str]) -> set[tuple]:
+    """The publishers (_publisher) whose messages hold both wheel joints at
+    one value all along, when another publisher's move them: a
+    joint_state_publisher beside the wheel driver sends every joint at its
+    default (0), and interleaved with the driver's those rows read as
+    wheels jumping to 0 and back (a probe: batch 1.76 at z +26, blaming an
+    encoder counting backwards; or a refusal naming a 1003 m/s wheel)."""
+    values: dict[tuple, list] = {}
+    for m in msgs:
+        _, names, pos, vel = m
+        if joints[0] in names and joints[1] in names:
+            idx = [names.index(joints[0]), names.index(joints[1])]
+            # positions and velocities, where filled: a driver may fill positions with zeros
+            values.setdefault(_publisher(m), []).append(np.concatenate(
+                [a[idx] if a.size == len(names) else np.zeros(2) for a in (pos, vel)]))
+    if len(values) < 2:
+        return set()
+    still = {k for k, v in values.items() if not np.any(np.ptp(np.array(v), axis=0) > 0.0)}
+    return still if len(still) < len(values) else set()
+
+
 def _joint_rows(bag, topic: str, msgs: list, left: str | None, right: str | None, notes: list,
                 not_finite: dict) -> list[tuple]:
     """Wheel rows (t, left position, right position, left velocity, right
@@ -381,7 +409,15 @@ def _joint_rows(bag, topic: str, msgs: list, left: str | None, right: str | None
             raise error
         joints = max(pairs, key=lambda pr: ("wheel" in pr[0].lower() and "wheel" in pr[1].lower(), pairs[pr]))
     rows, other = [], 0
-    for stamp, names, pos, vel in msgs:
+    frozen = _frozen_publishers(msgs, joints)
+    if frozen:
+        n = sum(1 for m in msgs if _publisher(m) in frozen)
+        notes.append(f"{topic}: {n} messages from another publisher (its names {list(next(iter(frozen))[0])}) that "
+                     f"hold the wheel joints at a constant value (joint_state_publisher's defaults?) skipped")
+    for m in msgs:
+        stamp, names, pos, vel = m
+        if frozen and _publisher(m) in frozen:
+            continue
         if joints[0] not in names or joints[1] not in names:
             other += 1
             continue
