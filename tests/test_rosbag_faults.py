@@ -24,7 +24,7 @@ JOINTS = ["left_wheel_joint", "right_wheel_joint"]
 
 def _bag(path: Path, log, order=lambda k: JOINTS, arm_every=0, fix=None, imu_cov=0.0, imu_rate=None,
          stamp=lambda t: t, positions=True, velocities=False, wrap=False, arm_names=("arm_shoulder", "arm_elbow"), fix_stamp=None,
-         arm_position=(0.1, 0.2)):
+         arm_position=(0.1, 0.2), restart=None):
     """A ROS 2 bag of ``log``: JointState wheels (joint names per message
     from ``order(k)``; every ``arm_every``-th message an arm's JointState on
     the same topic; ``wrap``: positions modulo 2 pi), NavSatFix (``fix(k, lat, lon, cov)`` may change a fix),
@@ -50,6 +50,10 @@ def _bag(path: Path, log, order=lambda k: JOINTS, arm_every=0, fix=None, imu_cov
               "right_wheel_joint": np.cumsum(e.ticks_right) / r.ticks_per_meter_right / R_WHEEL}
     if wrap:
         angles = {k: (v + np.pi) % (2 * np.pi) - np.pi for k, v in angles.items()}
+    if restart is not None:
+        # the driver silent over (t0, t1), its positions counting from 0 again at t1
+        k1 = int(np.searchsorted(e.t, restart[1]))
+        angles = {k: np.concatenate([v[:k1], v[k1:] - v[k1]]) for k, v in angles.items()}
     dt = np.diff(e.t, prepend=e.t[0] - 0.05)
     rates = {"left_wheel_joint": e.ticks_left / r.ticks_per_meter_left / R_WHEEL / dt,
              "right_wheel_joint": e.ticks_right / r.ticks_per_meter_right / R_WHEEL / dt}
@@ -61,6 +65,8 @@ def _bag(path: Path, log, order=lambda k: JOINTS, arm_every=0, fix=None, imu_cov
         ci = w.add_connection("/imu", "sensor_msgs/msg/Imu", typestore=ts)
         JS = T["sensor_msgs/msg/JointState"]
         for k, t in enumerate(e.t):
+            if restart is not None and restart[0] < t < restart[1]:
+                continue
             names = order(k)
             pos = np.array([angles[n][k] if n in angles else 0.3 for n in names]) if positions else np.zeros(len(names))
             msg = JS(header=header(t), name=list(names), position=pos,
@@ -396,3 +402,23 @@ def test_a_joint_state_publisher_beside_the_driver_is_skipped(sim, clean, tmp_pa
     vel = _imp(_bag(tmp_path / "jspv", sim, positions=False, velocities=True, arm_every=3, arm_names=jsp,
                     arm_position=(0.0, 0.0, 0.0)))
     assert len(vel.wheel_speeds.t) == len(sim.encoders.t) and np.ptp(vel.wheel_speeds.v_left) > 0.5
+
+
+def test_a_wheel_driver_restart_is_left_out_not_taken_as_a_backward_drive(sim, clean, tmp_path):
+    """A wheel driver restarting (3 s without messages, then positions from
+    0 again) was imported as one -9 m/s row lasting 3 s, without a word, and
+    the estimators blamed an encoder counting backwards (a probe). The
+    interval across the restart is left out with a note; the rest equal the
+    clean bag's. A robot driving back through 0 is not a restart."""
+    e = sim.encoders
+    log = _imp(_bag(tmp_path / "restart", sim, restart=(12.0, 15.0)))
+    k0, k1 = int(np.searchsorted(e.t, 12.0)), int(np.searchsorted(e.t, 15.0))
+    assert any("began again near 0 (a driver restart) 1 time(s), at t = " f"{e.t[k0 - 1]:.2f}-{e.t[k1]:.2f} s" in n
+               for n in log.notes)
+    ws, ref = log.wheel_speeds, clean.wheel_speeds
+    assert len(ws.t) == len(ref.t) - (k1 - k0) - 1 and np.all(np.abs(ws.v_left) < 3.0)
+    np.testing.assert_array_equal(ws.v_left[:k0 - 1], ref.v_left[:k0 - 1])
+    np.testing.assert_array_equal(ws.v_right[k0 - 1:], ref.v_right[k1:])
+    from odomgraph.io.importers.rosbag import _restarts
+    back = np.concatenate([np.linspace(40.0, -5.0, 400), np.linspace(-5.0, 3.0, 50)])
+    assert not _restarts(back, 0.5 * back).any()

@@ -733,10 +733,42 @@ def _wheel_speeds(bag, topic, kind, rows, wheel_radius, track_width, notes) -> W
         # each interval's mean speed, stamped at its midpoint: an instant to second order (LOG_FORMAT)
         a, b = (_unwrap_angle(x, topic, side, notes) for x, side in ((a, "left"), (b, "right")))
         dt = np.diff(t)
-        return WheelSpeeds(0.5 * (t[1:] + t[:-1]), np.diff(a) * wheel_radius / dt, np.diff(b) * wheel_radius / dt)
+        keep = ~_restarts(a, b)
+        if not keep.all():
+            at = ", ".join(f"{t[k]:.2f}-{t[k + 1]:.2f}" for k in np.flatnonzero(~keep)[:5])
+            notes.append(f"{topic}: the wheel positions began again near 0 (a driver restart) {int((~keep).sum())} "
+                         f"time(s), at t = {at} s: the interval across each is left out (the wheels' travel "
+                         "over it is unknown)")
+        return WheelSpeeds(0.5 * (t[1:] + t[:-1])[keep], (np.diff(a) * wheel_radius / dt)[keep],
+                           (np.diff(b) * wheel_radius / dt)[keep])
     if velocities:
         return WheelSpeeds(t, vl * wheel_radius, vr * wheel_radius)
     raise LogFormatError(bag, f"{topic}: JointState has neither positions nor velocities for the wheels")
+
+
+#: A driver restart (_restarts): both wheel positions land within this of 0 [rad]...
+RESTART_NEAR = 1.0
+#: ...after a step of at least this many turns on each wheel, towards 0...
+RESTART_TURNS = 1.0
+#: ...and this many times the wheel's median step between messages.
+RESTART_STEPS = 20.0
+
+
+def _restarts(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """(N - 1,) True for the intervals across which both wheel positions
+    [rad] (N,) began again at 0: a driver restarted (a probe: a 3 s gap
+    after which positions counted from 0 again was imported as one -9 m/s
+    row, and the estimators blamed an encoder counting backwards). Both
+    land within RESTART_NEAR of 0 from at least RESTART_TURNS turns away,
+    a step RESTART_STEPS times the wheel's median one or more: a robot
+    that drives back to where its wheels read 0 does so step by step."""
+    out = np.ones(max(a.size - 1, 0), bool)
+    for x in (a, b):
+        d = np.diff(x)
+        typical = float(np.median(np.abs(d))) if d.size else 0.0
+        out &= ((np.abs(x[1:]) <= RESTART_NEAR) & (np.abs(x[:-1]) >= RESTART_NEAR + 2 * np.pi * RESTART_TURNS)
+                & (np.abs(d) > RESTART_STEPS * typical))
+    return out
 
 
 def _unwrap_angle(x: np.ndarray, topic: str, side: str, notes: list) -> np.ndarray:
