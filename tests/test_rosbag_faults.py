@@ -422,3 +422,24 @@ def test_a_wheel_driver_restart_is_left_out_not_taken_as_a_backward_drive(sim, c
     from odomgraph.io.importers.rosbag import _restarts
     back = np.concatenate([np.linspace(40.0, -5.0, 400), np.linspace(-5.0, 3.0, 50)])
     assert not _restarts(back, 0.5 * back).any()
+
+
+def test_a_clock_stepping_back_is_said_and_a_big_step_refused(sim, tmp_path):
+    """A system clock stepping back (chrony) under the header stamps: 0.1-0.3
+    s imported silently with rows at 50-141 m/s, 1 s was refused for "a
+    wheel speed of 2468 m/s" with no word of the clock (a probe). Now each
+    topic's step is said with the --stamps receive hint; a wheel topic
+    stepping back 0.5 s or more is refused with it; receive stamps import."""
+    T0 = 1_700_000_000.0
+    small = _imp(_bag(tmp_path / "small", sim, stamp=lambda t: T0 + t - (0.15 if t > 12.0 else 0.0)))
+    for topic in ("/joint_states", "/fix", "/imu"):
+        line = next(w for w in small.warnings if w.startswith(f"{topic}: its header stamps step back 1 time(s)"))
+        assert "by about 0.15 s" in line and line.endswith("--stamps receive uses the bag's receive times")
+    with pytest.raises(LogFormatError, match=r"/joint_states: its header stamps step back 1 time\(s\), by about 1 s"):
+        _imp(_bag(tmp_path / "big", sim, stamp=lambda t: T0 + t - (1.0 if t > 12.0 else 0.0)))
+    rx = _imp(tmp_path / "big", stamps="receive")
+    assert not any("step back" in w for w in rx.warnings) and np.abs(rx.wheel_speeds.v_left).max() < 3.0
+    # jitter that keeps the stamps in order is nothing
+    rng = np.random.default_rng(3)
+    calm = _imp(_bag(tmp_path / "calm", sim, stamp=lambda t: T0 + t + 0.004 * rng.random()))
+    assert not any("step back" in w for w in calm.warnings)

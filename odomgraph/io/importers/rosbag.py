@@ -159,6 +159,44 @@ def _drop_unset(topic: str, rows: list, real_clock: bool, notes: list) -> None:
         rows[:] = [(0.0, *r[1:]) if r[0] == UNSET else r for r in rows]
 
 
+#: Header stamps stepping back more than this many of the topic's periods (at
+#: least STEP_BACK_MIN_S) from one message to the next, in the order the bag
+#: received them: a clock step (a step back of 0.1 s at 20 Hz is one message
+#: stamped 0.05 s before the one received before it).
+STEP_BACK_PERIODS = 0.5
+STEP_BACK_MIN_S = 0.01
+#: A wheel topic stepping back this far [s] is refused: its rows interleave
+#: two stretches of time (a probe: 1 s back read as a 2468 m/s wheel).
+STEP_BACK_REFUSE_S = 0.5
+
+
+def _steps_back(bag, topic: str, rows: list, wheels: bool, warnings: list) -> None:
+    """Say a topic whose header stamps (rows' first element, in the order
+    the bag received them) step back: a system clock stepped (chrony, NTP),
+    and sorting by stamp interleaves the rows before and after it (a probe:
+    0.1-0.3 s back imported silently, rows at 50-141 m/s that the
+    estimators then rejected; 1 s back refused for a 2468 m/s wheel, with
+    no word of the clock). A warning with the --stamps receive hint; a
+    wheel topic stepping back STEP_BACK_REFUSE_S or more is refused."""
+    t = np.array([r[0] for r in rows if r[0] != UNSET], float)
+    if t.size < 3:
+        return
+    d = np.diff(t)
+    ahead = d[d > 0]
+    period = float(np.median(ahead)) if ahead.size else 0.0
+    k = np.flatnonzero(-d > max(STEP_BACK_PERIODS * period, STEP_BACK_MIN_S))
+    if not k.size:
+        return
+    worst = int(k[np.argmax(-d[k])])
+    # the clock's step: the stamp fell short of the one before by this, where it should have gained a period
+    line = (f"{topic}: its header stamps step back {k.size} time(s), by about {period - d[worst]:.2g} s (after "
+            f"t = {t[worst]:.2f} s in the log's clock): a clock step; sorted by stamp, the rows around it "
+            "interleave. --stamps receive uses the bag's receive times")
+    if wheels and period - d[worst] >= STEP_BACK_REFUSE_S:
+        raise LogFormatError(bag, line)
+    warnings.append(line)
+
+
 def _candidates(conns) -> dict[str, list]:
     """{role: [connection, ...]} of the topics each role could take."""
     out = {"wheels": [], "imu": [], "gps": []}
@@ -600,6 +638,10 @@ def import_rosbag(bag: Path | str, wheel_topic: str | None = None, left_joint: s
         _drop_unset(topic, rows, bool(origin_ns), notes)
     if kind == "joints":
         wheels = _joint_rows(bag, chosen["wheels"], joint_msgs, left_joint, right_joint, notes, not_finite)
+    if stamps != "receive":
+        # the wheels' own rows (another JointState publisher's stamps are its own)
+        for topic, rows in ((chosen["wheels"], wheels), (chosen["gps"], fixes), (chosen["imu"], rates)):
+            _steps_back(bag, topic, rows, topic == chosen["wheels"], warnings)
     if null_island:
         notes.append(f"{chosen['gps']}: {null_island} fixes at latitude 0, longitude 0 (a receiver's placeholder "
                      "before its first fix) dropped")
