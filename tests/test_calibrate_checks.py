@@ -4,6 +4,8 @@ nominal parameters, and an empty calibration window is said. Logs from
 both scenarios and several seeds, none of them designed around the checks."""
 from dataclasses import replace
 
+import re
+
 import numpy as np
 import pytest
 from typer.testing import CliRunner
@@ -68,6 +70,26 @@ def test_a_degrees_gyro_is_named_on_a_log_with_slip(which, seed):
     assert mounting_warnings(log) == []
     w = mounting_warnings(log.with_(gyro=replace(log.gyro, omega=np.degrees(log.gyro.omega))))
     assert len(w) == 1 and "degrees per second" in w[0], w
+
+
+@pytest.mark.parametrize("which,seed", [("paper", 16), ("yard", 17)])
+def test_wheel_units_far_off_the_gyro_are_named(which, seed):
+    """JointState positions in degrees, or a wheel radius in cm, passed the
+    import and estimate said only "path 91 % shorter" or nothing (a probe):
+    the wheels against the gyro name the unit. A skid-steer's wheels turning
+    2-3x the robot (the Jackal: 2.2x) is not a unit."""
+    log = inject((paper if which == "paper" else yard)(60.0), Faults(), seed)   # with its slip events
+    r = log.robot
+
+    def wheels_times(f, track=1.0):
+        return log.with_(robot=r.with_(ticks_per_meter_left=r.ticks_per_meter_left / f,
+                                       ticks_per_meter_right=r.ticks_per_meter_right / f,
+                                       track_width=r.track_width * track))
+    w = mounting_warnings(wheels_times(np.degrees(1.0)))
+    assert len(w) == 1 and re.match(r"the wheels turn (5\d|6\d)x faster than the gyro", w[0]) and "degrees" in w[0], w
+    w = mounting_warnings(wheels_times(100.0))
+    assert len(w) == 1 and re.match(r"the gyro reads 0.0(09|1)\d*x", w[0]) and "cm or mm" in w[0], w
+    assert mounting_warnings(wheels_times(1.0, track=1.0 / 2.5)) == []      # skid: the wheels turn 2.5x
 
 
 def test_mounting_mistakes_are_said_by_estimate():

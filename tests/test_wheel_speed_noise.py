@@ -96,13 +96,13 @@ def test_calibrate_writes_the_widened_sigma_back():
 
 def test_the_shipped_real_wheel_speeds_are_not_widened():
     """The README's figures for the real logs: the libRSF cut's wheels (7.8 Hz,
-    a small robot pivoting fast) measure 1.32 and the Jackal's 0.25, under
-    WHEEL_WIDEN_ABOVE, so the real_data tables did not move."""
+    a small robot pivoting fast) are too slow to judge (they measured 1.32)
+    and the Jackal's measure 0.25, under WHEEL_WIDEN_ABOVE, so the real_data
+    tables did not move."""
     from pathlib import Path
     from odomgraph.io.importers.librsf import import_librsf
     data = Path(__file__).parent / "data"
-    f = wheel_row_scale(import_librsf(data / "librsf" / "Indoor_UWB_Input.txt"))
-    assert f == pytest.approx(1.32, abs=0.01) and f < WHEEL_WIDEN_ABOVE
+    assert wheel_row_scale(import_librsf(data / "librsf" / "Indoor_UWB_Input.txt")) is None
     pytest.importorskip("rosbags")
     from odomgraph.io.importers.rosbag import import_rosbag
     # the Jackal's JointState at 50 Hz: well inside robot.toml's sigma
@@ -127,17 +127,42 @@ def test_encoder_rows_measure_their_noise_net_of_the_ticks_quantisation():
     rows 2, 5 and 10 times noisier give the factor back within 12 %, where
     the quantisation dominates too (the yard's 1000 ticks/m at 20 Hz)."""
     from odomgraph.analysis.noise import ENCODER_SCATTER_ABOVE
-    for scenario, hz, seed in ((paper, 10, 61), (paper, 100, 62), (yard, 10, 63), (yard, 50, 64), (yard, 100, 65)):
+    for scenario, hz, seed in ((paper, 20, 61), (paper, 50, 62), (yard, 20, 63)):
         sc = scenario(40.0)
         f = wheel_row_scale(simulate(sc.with_(rates=replace(sc.rates, encoders=float(hz))), seed))
         assert 0.9 < f < ENCODER_SCATTER_ABOVE, (scenario.__name__, hz, f)
-    for scenario, k, seed in ((paper, 2.0, 66), (paper, 5.0, 67), (yard, 5.0, 68), (yard, 10.0, 69)):
-        f = wheel_row_scale(_noisier(scenario, k, seed)[1])
+    for scenario, k, seed, hz in ((paper, 2.0, 66, 20.0), (paper, 5.0, 67, 50.0), (yard, 5.0, 68, 20.0),
+                                  (yard, 10.0, 69, 50.0), (paper, 10.0, 70, 100.0)):
+        f = wheel_row_scale(_noisier(scenario, k, seed, hz)[1])
         assert f == pytest.approx(k, rel=0.12), (scenario.__name__, k, f)
 
 
+def test_rows_the_measure_cannot_judge_are_left_alone():
+    """Where the ticks' quantisation is most of the rows' noise (its patterns
+    fool the measure: a probe's yard at 400 Hz, or 100 ticks/m at 50 Hz, at
+    their true sigma, measured 13-100 and isam2's scale factors came out z
+    +5 to +6, status ok), and rows slower than 15 Hz (a stop-and-go robot's
+    own speed changes measured 1.6-6): not judged, nothing widened, the
+    estimate as before."""
+    for scenario, hz, seed, tpm in ((yard, 400.0, 74, None), (yard, 50.0, 75, 100.0), (yard, 20.0, 76, 50.0),
+                                    (paper, 200.0, 77, 100.0), (paper, 10.0, 78, None)):
+        sc = scenario(60.0)
+        if tpm:
+            sc = sc.with_(robot=sc.robot.with_(ticks_per_meter_left=tpm, ticks_per_meter_right=tpm))
+        log = simulate(sc.with_(rates=replace(sc.rates, encoders=hz)), seed)
+        assert wheel_row_scale(log) is None, (scenario.__name__, hz, tpm)
+    # a 100 ticks/m yard at 50 Hz: isam2 within 3 sigma, with no wheel warning
+    sc = yard(60.0)
+    sc = sc.with_(robot=sc.robot.with_(ticks_per_meter_left=100.0, ticks_per_meter_right=100.0),
+                  rates=replace(sc.rates, encoders=50.0))
+    est = estimate(simulate(sc, 79), "isam2", Schedule(30.0))
+    assert "encoders" not in est.noise_scales and not any(w.startswith("encoders: consecutive") for w in est.warnings)
+    z = (est.mean[-1, S.SCALE] - np.array(sc.scales)) / est.sigma[-1, S.SCALE]
+    assert np.abs(z).max() < 3.0, z
+
+
 @pytest.mark.parametrize("scenario, f, seed, hz", [(paper, 8.0, 71, 20.0), (yard, 5.0, 72, 20.0),
-                                                   (yard, 4.0, 73, 50.0)])
+                                                   (yard, 10.0, 73, 50.0)])
 def test_batch_on_encoders_noisier_than_their_sigma_is_within_its_sigma(scenario, f, seed, hz):
     """Other seeds, factors and rates than the probe's (paper x10, yard x5,
     seed 9): robot.toml's [encoders] sigma is widened by what the rows
@@ -183,10 +208,13 @@ def test_a_gyro_noisier_than_its_sigma_is_measured_widened_and_written_back():
     from odomgraph.analysis.noise import GYRO_WIDEN_ABOVE, gyro_row_scale
     from odomgraph.analysis.metrics import nis_summary
     from odomgraph.pipeline import calibrate
-    for scenario, hz, seed in ((paper, 10.0, 81), (paper, 400.0, 82), (yard, 25.0, 83), (yard, 100.0, 84)):
+    for scenario, hz, seed in ((paper, 12.0, 81), (paper, 400.0, 82), (yard, 25.0, 83), (yard, 100.0, 84)):
         sc = scenario(40.0)
         f = gyro_row_scale(simulate(sc.with_(rates=replace(sc.rates, gyro=hz)), seed))
         assert 0.85 < f < 1.3 < GYRO_WIDEN_ABOVE, (scenario.__name__, hz, f)
+    # a gyro slower than 10 Hz is not judged (a probe: 1 Hz on fast pivots measured 72)
+    sc = paper(40.0)
+    assert gyro_row_scale(simulate(sc.with_(rates=replace(sc.rates, gyro=5.0)), 80)) is None
     for scenario, f, seed, hz, method in ((paper, 8.0, 85, 25.0, "ekf"), (yard, 6.0, 86, 50.0, "batch"),
                                           (paper, 4.0, 87, 100.0, "ekf")):
         sc, log = _noisier_gyro(scenario, f, seed, hz)

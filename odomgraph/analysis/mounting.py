@@ -102,6 +102,11 @@ def _fixes_still(log, t0: float, t1: float, wheel_travel: float) -> bool:
     return spread < max(0.25 * wheel_travel, 6.0 * sig)
 
 
+#: A gyro reading more than this many times the wheels' turn rate, or less
+#: than its inverse, is not a calibration away: a unit is wrong (cm for m is
+#: 100, degrees for radians 57). A skid-steer's wheels turn faster than the
+#: robot: the Jackal's 2.2x (slope 0.46), longer tracked robots more.
+UNITS_OFF = 10.0
 #: A gyro whose bin means vary less than this many times their own noise saw no turn.
 FLAT = 3.0
 
@@ -144,6 +149,9 @@ def mounting_warnings(log) -> list[str]:
             # gave 0.64 and 0.34 on a log with slip); the top of each
             # distribution is the robot's real turns.
             slope = float(np.percentile(np.abs(g), 95) / np.percentile(np.abs(w), 95))
+    units = _wheel_units_line(gyro_c, slope)
+    if units:
+        return [units]     # every check below reads the wheels in their units, and would blame something else
     out = []
     speed = fix_speed_correlation(log)
     if speed is not None and speed[0] < MIN_CORRELATION:
@@ -203,6 +211,24 @@ def mounting_warnings(log) -> list[str]:
         out.append(f"the gyro reads {slope:.0f}x the wheels' turn rate: it looks like degrees per second, and the "
                    "log must hold rad/s")
     return out
+
+
+def _wheel_units_line(gyro_c: float | None, slope: float | None) -> str | None:
+    """The line for wheels whose turn rate is UNITS_OFF or more times off the
+    gyro's (which follows them: gyro_c > MIN_CORRELATION), or None. A probe:
+    JointState positions in degrees, and a wheel radius in cm, passed the
+    import, and estimate blamed an encoder counting backwards (the path
+    dead-reckoned from such wheels follows nothing). A gyro in degrees per
+    second is mounting_warnings' own line."""
+    if gyro_c is None or gyro_c < MIN_CORRELATION or slope is None or slope <= 0:
+        return None
+    if 35.0 < 1.0 / slope < 90.0:
+        return (f"the wheels turn {1.0 / slope:.0f}x faster than the gyro: their speeds look like degrees, not "
+                "radians, times the wheel radius (or the radius, ticks per metre or track are off that much)")
+    if not 1.0 / UNITS_OFF < slope < UNITS_OFF and not 35.0 < slope < 90.0:
+        return (f"the gyro reads {slope:.3g}x the wheels' turn rate: the wheel speeds, or the track width, are off "
+                "by that factor (a unit: cm or mm for m?), far beyond any calibration or skid")
+    return None
 
 
 #: A grid step is compared only when the fixes around both its ends are at
