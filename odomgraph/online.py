@@ -77,9 +77,11 @@ AHEAD_ROWS = SPIKE_HALF + 1
 #: A sensor whose newest row is this much older than the newest data [s] has
 #: stopped (a dropout): the filter no longer waits for its rows ahead.
 STOPPED_AFTER = 1.0
-#: A sensor's measurements rejected as older than the latency window: at this
-#: many the stream says so at once (a probe: GPS lines 0.4 s behind under
-#: --latency 0.25 were every one rejected, said only in the end's summary).
+#: A sensor's measurements rejected as older than the latency window this
+#: many in a row (none taken between): the stream says so at once (a probe:
+#: GPS lines 0.4 s behind under --latency 0.25 were every one rejected, said
+#: only in the end's summary). In a row: a few late ones over hours of a
+#: healthy stream are counted, not alarmed on (a second read).
 LATE_SAY = 5
 #: A stamp this far [s] past the newest is held, not taken as the new time,
 #: until another sensor's confirm it (a whole system that paused): one stray
@@ -237,7 +239,7 @@ class Online:
         self._gyro_top: tuple | None = None  # (t, omega) of the largest |rate| so far (the rail test's)
         self._nis = {}                      # sensor -> [sum of accepted NIS, count, dimension]
         self.alerts: list[str] = []         # warnings said as they arise (odomgraph stream prints them)
-        self._late_by: dict[str, float] = {}    # sensor -> the most [s] a rejected late measurement was behind
+        self._late_by: dict[str, list] = {}     # sensor -> [late in a row, the most [s] behind, said]
         self._settle_said = 0
         self._fail_t = None                 # time of the event being filtered (a divergence's)
         # The estimator started with no absolute measurement and no [initial]
@@ -263,17 +265,26 @@ class Online:
 
     def _late(self, sensor: str, t: float) -> None:
         """Count a measurement older than the latency window, and say it once
-        per sensor when LATE_SAY have come (how far behind the newest)."""
+        per sensor when LATE_SAY have come in a row (how far behind the newest)."""
         _Counts.add(self.counts.late, sensor)
         by = getattr(self, "_late_by", None)       # (a checkpoint written before it existed)
         if by is None:
             by = self._late_by = {}
-        by[sensor] = max(by.get(sensor, 0.0), self.t_newest - t)
-        if self.counts.late[sensor] == LATE_SAY:
+        run = by.setdefault(sensor, [0, 0.0, False])
+        run[0] += 1
+        run[1] = max(run[1], self.t_newest - t)
+        if run[0] >= LATE_SAY and not run[2]:
+            run[2] = True
             self.alerts.append(
-                f"{sensor}: {LATE_SAY} measurements came older than the {self.latency:g} s latency window (up to "
-                f"{by[sensor]:.2f} s behind the newest stamp) and were rejected; more are counted in the summary: "
-                "a sensor this late needs a larger --latency, or its clock is behind")
+                f"{sensor}: {LATE_SAY} measurements in a row came older than the {self.latency:g} s latency window "
+                f"(up to {run[1]:.2f} s behind the newest stamp) and were rejected; the rest are counted in the "
+                "summary: a sensor this late needs a larger --latency, or its clock is behind")
+
+    def _on_time(self, sensor: str) -> None:
+        """A measurement taken: the sensor's run of late ones ends."""
+        run = getattr(self, "_late_by", {}).get(sensor)
+        if run is not None:
+            run[0], run[1] = 0, 0.0
 
     def _row(self, t: float, mean: np.ndarray, sigma: np.ndarray, pose_cov) -> OnlineRow:
         """An output row; its scale factors against robot.toml's (a restart carries them in the robot)."""
@@ -311,6 +322,7 @@ class Online:
         if t < self.t_released:
             self._late(sensor, t)
             return []
+        self._on_time(sensor)
         heapq.heappush(self._heap, (t, self._seq, sensor, vals))
         self._seq += 1
         if t > self.t_newest:

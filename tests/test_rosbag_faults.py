@@ -349,8 +349,10 @@ def test_wheel_topics_are_refused_by_whole_words_of_their_names():
     for fused in ("/odometry/filtered", "/ekf_odom", "/ekf2/odom", "/odom_fused", "/vo", "/camera/vio/odom",
                   "/rtabmap/visual_odometry", "/odometry/gps", "/global_odom", "/SLAM/odom"):
         assert _not_wheels(fused), fused
+    for fused in ("/odomFiltered", "/ekfOdom", "/vioOdom", "/globalOdom"):        # camelCase words
+        assert _not_wheels(fused), fused
     for wheels in ("/volksbot/odom", "/odom", "/wheel/odom", "/diff_drive_controller/odom", "/mobile_base/odom",
-                   "/voyager/odom", "/ekfbot/odom", "/rover2/wheel_odom"):
+                   "/voyager/odom", "/ekfbot/odom", "/rover2/wheel_odom", "/volksbotOdom", "/wheelOdom"):
         assert not _not_wheels(wheels), wheels
 
 
@@ -422,6 +424,13 @@ def test_a_wheel_driver_restart_is_left_out_not_taken_as_a_backward_drive(sim, c
     from odomgraph.io.importers.rosbag import _restarts
     back = np.concatenate([np.linspace(40.0, -5.0, 400), np.linspace(-5.0, 3.0, 50)])
     assert not _restarts(back, 0.5 * back).any()
+    # each guard on its own: a big step that does not land near 0, one from near 0, one as small as the rest
+    steady = np.linspace(0.0, 300.0, 301)
+    assert _restarts(np.r_[steady, 0.2, 1.2], np.r_[steady, 0.1, 1.1]).sum() == 1
+    assert not _restarts(np.r_[steady, 50.0, 51.0], np.r_[steady, 0.1, 1.1]).any()
+    assert not _restarts(np.r_[np.linspace(0.0, 6.0, 301), 0.2, 0.22], np.r_[steady[:301] / 50, 0.1, 0.12]).any()
+    fast = np.arange(0.0, 40.0, 8.0)                    # steps of 8 rad: a step back to 0 of 32 is only 4 of them
+    assert not _restarts(np.r_[fast, 0.5], np.r_[fast, 0.4]).any()
 
 
 def test_a_clock_stepping_back_is_said_and_a_big_step_refused(sim, tmp_path):
@@ -443,3 +452,21 @@ def test_a_clock_stepping_back_is_said_and_a_big_step_refused(sim, tmp_path):
     rng = np.random.default_rng(3)
     calm = _imp(_bag(tmp_path / "calm", sim, stamp=lambda t: T0 + t + 0.004 * rng.random()))
     assert not any("step back" in w for w in calm.warnings)
+
+
+def test_a_driver_that_never_sets_its_stamps_beside_joint_state_publisher_is_refused(sim, tmp_path):
+    """The wheel driver leaves every header stamp at 0 while a
+    joint_state_publisher on the same topic sets its own: the driver's
+    messages were dropped as "unset among others", and the publisher's
+    zeros became a robot that never moved (a second read). Each publisher
+    is judged on its own: the driver's all-unset stamps are refused with
+    the --stamps receive hint, which imports the wheels."""
+    T0 = 1_700_000_000.0
+    grid = set(np.round(sim.encoders.t, 9))
+    jsp = ("caster_joint", *JOINTS)
+    path = _bag(tmp_path / "b", sim, arm_every=2, arm_names=jsp, arm_position=(0.0, 0.0, 0.0),
+                stamp=lambda t: 0.0 if round(t, 9) in grid else T0 + t)
+    with pytest.raises(LogFormatError, match="same header stamp; --stamps receive"):
+        _imp(path)
+    rx = _imp(path, stamps="receive")
+    assert np.abs(rx.wheel_speeds.v_left).max() > 0.5

@@ -111,10 +111,11 @@ def nis_warning(sensor: str, total: float, n: int, dof: int) -> str | None:
     """The warning for a sensor whose ``n`` accepted updates summed ``total``
     NIS (dimension ``dof``) when their mean is above NIS_WARN x dof; else None.
     One text for estimate's EKF and the stream."""
-    if n < NIS_MIN_COUNT or total / n <= NIS_WARN * dof:
+    if n < NIS_MIN_COUNT or not total / n > NIS_WARN * dof:     # (not >: a NaN is no verdict)
         return None
     return (f"{sensor}: mean NIS {total / n:.1f} over {n} updates, expected {dof}: the estimate's sigma "
-            "understates its error (a clock off, a sigma too small?)")
+            "understates its error (a clock off, a sigma too small, or motion the model does not hold: a "
+            "skid-steer's turns, slip?)")
 
 
 def nis_warnings(est: Estimate) -> list[str]:

@@ -208,6 +208,10 @@ ENCODER_MIN_HZ = 15.0
 #: (a probe: a 1 Hz gyro on fast pivots measured 72, at 2 Hz 2.4, at 10-25 Hz
 #: 1.03-1.26 with step-like pivots).
 GYRO_MIN_HZ = 10.0
+#: The median period may exceed 1 / rate by this factor: a nominal 15 Hz log's
+#: jittered median lands on either side of 1/15 (a second read: 2 of 6 seeds
+#: at 15 Hz were not judged).
+RATE_SLACK = 1.05
 #: Encoder rows whose plain whitened scatter (eq. 41 and the ticks'
 #: quantisation at robot.toml's sigma) is above this have the factor on the
 #: sigma solved for (wheel_row_scale); below, the plain scatter is returned.
@@ -285,7 +289,7 @@ def _row_scale(clean, a: float, b: float) -> float | None:
     if dt.size < 3:
         return None
     med = float(np.median(dt))
-    if med > 1.0 / ENCODER_MIN_HZ:
+    if med > RATE_SLACK / ENCODER_MIN_HZ:
         return None          # the motion's own changes between rows pass for noise (a probe's stop-and-go at 5 Hz: 3.6-6.1)
     gap_ok = dt <= WHEEL_MAX_GAP * med
     if clean.encoders is not None:
@@ -361,7 +365,7 @@ def gyro_row_scale(log) -> float | None:
         return None
     g = despike(log.with_(encoders=None, wheel_speeds=None))[0].gyro
     dt = np.diff(g.t)
-    if dt.size < 2 or not 0.0 < float(np.median(dt)) <= 1.0 / GYRO_MIN_HZ:
+    if dt.size < 2 or not 0.0 < float(np.median(dt)) <= RATE_SLACK / GYRO_MIN_HZ:
         return None
     gap_ok = dt <= WHEEL_MAX_GAP * float(np.median(dt))
     d2 = (g.omega[2:] - 2.0 * g.omega[1:-1] + g.omega[:-2])[gap_ok[1:] & gap_ok[:-1]]

@@ -137,26 +137,44 @@ def _increasing(t: np.ndarray, *cols):
 
 
 def _not_wheels(topic: str) -> bool:
-    """True when a word of the topic's name (split at "/", "_", "-" and the
-    like; trailing digits dropped, so "ekf2" is "ekf") says it is not the
-    wheels' own odometry."""
-    words = (w.rstrip("0123456789") for w in re.split(r"[^a-z0-9]+", topic.lower()))
+    """True when a word of the topic's name (split at "/", "_", "-", the
+    like and camelCase; trailing digits dropped, so "ekf2" is "ekf") says it
+    is not the wheels' own odometry."""
+    spaced = re.sub(r"([a-z0-9])([A-Z])", r"\1 \2", topic)       # camelCase: /odomFiltered
+    words = (w.rstrip("0123456789") for w in re.split(r"[^a-z0-9]+", spaced.lower()))
     return any(w in NOT_WHEELS for w in words)
 
 
-def _drop_unset(topic: str, rows: list, real_clock: bool, notes: list) -> None:
+def _drop_unset(topic: str, rows: list, real_clock: bool, notes: list, publisher=None) -> None:
     """Rows whose header stamp was 0 s (stamp UNSET, first element) are
-    dropped with a note when the bag runs on a real clock and the topic has
-    others; on a simulated clock (use_sim_time, from 0) 0 s is a stamp like
-    any other. When every message was unset they all take one stamp, so that
-    the equal-stamp checks refuse or leave out the sensor with the
-    --stamps receive hint. In place."""
-    unset = sum(1 for r in rows if r[0] == UNSET)
-    if unset and unset < len(rows) and real_clock:
-        rows[:] = [r for r in rows if r[0] != UNSET]
-        notes.append(f"{topic}: {unset} of {unset + len(rows)} messages with an unset header stamp (0 s) dropped")
-    elif unset:
-        rows[:] = [(0.0, *r[1:]) if r[0] == UNSET else r for r in rows]
+    dropped with a note when the bag runs on a real clock and their
+    publisher has others; on a simulated clock (use_sim_time, from 0) 0 s is
+    a stamp like any other. When every message of a publisher was unset
+    they all take one stamp, so that the equal-stamp checks refuse or leave
+    out the sensor with the --stamps receive hint. In place, in order.
+    ``publisher(row)`` tells publishers on one topic apart (JointState:
+    _publisher): a driver that never sets its stamps beside a
+    joint_state_publisher that does must not leave the publisher's zeros
+    as the wheels (a second read)."""
+    keys = [publisher(r) if publisher is not None else None for r in rows]
+    total: dict = {}
+    unset: dict = {}
+    for r, k in zip(rows, keys):
+        total[k] = total.get(k, 0) + 1
+        unset[k] = unset.get(k, 0) + (r[0] == UNSET)
+    if not any(unset.values()):
+        return
+    out, dropped = [], 0
+    for r, k in zip(rows, keys):
+        if r[0] != UNSET:
+            out.append(r)
+        elif real_clock and unset[k] < total[k]:
+            dropped += 1
+        else:
+            out.append((0.0, *r[1:]))
+    rows[:] = out
+    if dropped:
+        notes.append(f"{topic}: {dropped} of {len(keys)} messages with an unset header stamp (0 s) dropped")
 
 
 #: Header stamps stepping back more than this many of the topic's periods (at
@@ -635,7 +653,8 @@ def import_rosbag(bag: Path | str, wheel_topic: str | None = None, left_joint: s
         raise _unreadable(bag, exc) from None
     for topic, rows in ((chosen["wheels"], joint_msgs if kind == "joints" else wheels), (chosen["gps"], fixes),
                         (chosen["imu"], rates)):
-        _drop_unset(topic, rows, bool(origin_ns), notes)
+        _drop_unset(topic, rows, bool(origin_ns), notes,
+                    _publisher if kind == "joints" and topic == chosen["wheels"] else None)
     if kind == "joints":
         wheels = _joint_rows(bag, chosen["wheels"], joint_msgs, left_joint, right_joint, notes, not_finite)
     if stamps != "receive":
