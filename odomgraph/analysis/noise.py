@@ -290,7 +290,8 @@ def _row_scale(clean, a: float, b: float) -> float | None:
         return None
     med = float(np.median(dt))
     if med > RATE_SLACK / ENCODER_MIN_HZ:
-        return None          # the motion's own changes between rows pass for noise (a probe's stop-and-go at 5 Hz: 3.6-6.1)
+        # the motion's own changes between rows pass for noise (a probe's stop-and-go at 5 Hz: 3.6-6.1)
+        return None
     gap_ok = dt <= WHEEL_MAX_GAP * med
     if clean.encoders is not None:
         ok = gap_ok[2:] & gap_ok[1:-1] & gap_ok[:-2]     # the rows' own intervals
