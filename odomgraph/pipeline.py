@@ -345,8 +345,8 @@ def _estimate_checked(log: Log, method: Method, schedule: Schedule, progress, op
     suspect += gyro_offset_warnings(log)
     # both references off alike: the wheels' stamps are, and one line says so in place of theirs
     suspect = without_reference_clocks(suspect + wheels_late_lines(suspect))
-    # the EKF's innovations (the smoothers keep none): stream says the same of its own
     suspect += _gap_warnings(est, log, options) + _revision_warnings(est) + lost_tick_warnings(log)
+    # the EKF's innovations (the smoothers keep none): stream says the same of its own
     suspect += nis_warnings(est)
     est.warnings += [w for w in suspect if w not in est.warnings] + _window_warnings(est, log, schedule)
     est.flags += suspect
