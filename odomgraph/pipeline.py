@@ -347,7 +347,7 @@ def _estimate_checked(log: Log, method: Method, schedule: Schedule, progress, op
     suspect = without_reference_clocks(suspect + wheels_late_lines(suspect))
     suspect += _gap_warnings(est, log, options) + _revision_warnings(est) + lost_tick_warnings(log)
     # the EKF's innovations (the smoothers keep none): stream says the same of its own
-    suspect += nis_warnings(est)
+    suspect += nis_warnings(est, rows)
     est.warnings += [w for w in suspect if w not in est.warnings] + _window_warnings(est, log, schedule)
     est.flags += suspect
     _note_motion_scales(est, log, motion)
@@ -470,9 +470,9 @@ def _note_row_scales(est: Estimate, log: Log, scales: dict[str, float]) -> None:
     row_scales) in ``est.noise_scales["encoders"]`` and ``["gyro"]``, with
     a warning for each one applied. ``log`` is the widened log the estimate
     ran on."""
-    from odomgraph.analysis.noise import GYRO_WIDEN_ABOVE, WHEEL_WIDEN_ABOVE
+    from odomgraph.analysis.noise import applied_row_scale
     for sensor, f in scales.items():
-        applied = f if f > (WHEEL_WIDEN_ABOVE if sensor == "encoders" else GYRO_WIDEN_ABOVE) else 1.0
+        applied = applied_row_scale(sensor, f)
         est.noise_scales[sensor] = {"measured": f, "applied": applied}
         if applied > 1.0:
             est.warnings.append(_row_scale_line(sensor, log, f))
@@ -484,11 +484,12 @@ def _row_scale_line(sensor: str, log: Log, f: float) -> str:
         g = log.robot.gyro_sigma
         return (f"gyro: consecutive samples scatter {f:.2g}x more than robot.toml's [gyro] sigma ({g / f:.3g} "
                 f"rad/s) says: it was widened to {g:.3g} rad/s for this run (calibrate writes it back)")
+    from odomgraph.analysis.noise import ROW_FACTOR_CAP
     a, b = log.robot.encoder_sigma
     if log.encoders is not None:
         return (f"encoders: consecutive rows' speeds scatter more than robot.toml's [encoders] sigma "
                 f"({a / f:.3g} m/s + {b / f:.3g} |v|) and the ticks' quantisation say: the wheels' noise fits "
-                f"{f:.2g}x that sigma, and it was widened to ({a:.3g}, {b:.3g}) for this run (calibrate writes "
+                f"{'at least ' if f >= ROW_FACTOR_CAP else ''}{f:.2g}x that sigma, and it was widened to ({a:.3g}, {b:.3g}) for this run (calibrate writes "
                 "it back)")
     return (f"wheel_speeds: consecutive rows scatter {f:.2g}x more than robot.toml's [encoders] sigma "
             f"({a / f:.3g} m/s + {b / f:.3g} |v|) says (speeds differenced from quantised wheel positions carry "
@@ -1248,6 +1249,7 @@ def _with_fitted_noise(robot, est: Estimate, warnings: list, per_fix_gps: bool =
     sigma does not stand for (LOG_FORMAT), so that one is left as it is; so
     is a sigma a filter widened from its predictions (analysis.noise.
     measured_from), with a line in ``warnings``."""
+    from odomgraph.analysis.noise import ROW_WIDEN_ABOVE, with_row_sigmas
     for sensor, field_name in (("gps", "gps_sigma"), ("ranges", "range_sigma")):
         if sensor == "gps" and per_fix_gps:
             continue
@@ -1259,12 +1261,8 @@ def _with_fitted_noise(robot, est: Estimate, warnings: list, per_fix_gps: bool =
             continue
         if f > 1.0:
             robot = robot.with_(**{field_name: getattr(robot, field_name) * f})
-    f = est.noise_scales.get("encoders", {}).get("applied", 1.0)
-    if f > 1.0:                        # the wheel rows' scatter (_note_row_scales)
-        robot = robot.with_(encoder_sigma=tuple(v * f for v in robot.encoder_sigma))
-    f = est.noise_scales.get("gyro", {}).get("applied", 1.0)
-    if f > 1.0:                        # the gyro samples' scatter (_note_row_scales)
-        robot = robot.with_(gyro_sigma=robot.gyro_sigma * f)
+    # the wheel rows' and gyro samples' scatter (_note_row_scales)
+    robot = with_row_sigmas(robot, {k: est.noise_scales.get(k, {}).get("applied", 1.0) for k in ROW_WIDEN_ABOVE})
     from dataclasses import replace
     pn = robot.process
     grown = {k: getattr(pn, k) * est.noise_scales[k]["applied"] for k in ("accel", "yaw_accel")

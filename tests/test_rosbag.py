@@ -13,14 +13,14 @@ from odomgraph.estimators.schedule import Schedule  # noqa: E402
 from odomgraph.io.importers.rosbag import import_rosbag  # noqa: E402
 from odomgraph.io.log import read_log  # noqa: E402
 from odomgraph.pipeline import Method, estimate  # noqa: E402
-from odomgraph.sim.scenarios import paper  # noqa: E402
+from odomgraph.sim.scenarios import paper, yard  # noqa: E402
 from odomgraph.sim.simulate import simulate  # noqa: E402
 
 LAT0, LON0, R_WHEEL = 41.5045, -81.6086, 0.15
 
 
 def _write_bag(path, log, wheels="joints", imu_axis="z", tf_lever=None, no_fix_every=0, t0=0.0,
-               extra_odom=False, storage="sqlite3", imu_tf=False, nan_every=0, **wheels_opts):
+               extra_odom=False, storage="sqlite3", imu_tf=False, nan_every=0, odom_twist=None, **wheels_opts):
     """A ROS 2 bag of ``log``: wheels as JointState positions or as the
     nav_msgs/Odometry twist; the gyro on IMU axis ``imu_axis`` ("-z": upside
     down); optionally /tf_static base_link -> gps with ``tf_lever``, every
@@ -28,7 +28,15 @@ def _write_bag(path, log, wheels="joints", imu_axis="z", tf_lever=None, no_fix_e
     ``wheels="twist"`` writes geometry_msgs/TwistStamped; ``imu_tf`` writes
     the IMU's mounting (yaw axis ``imu_axis``) into /tf_static; ``storage``:
     sqlite3 or mcap; ``nan_every``: every so many fixes a NaN latitude (status
-    0), IMU samples a NaN yaw rate and odometry twists an infinite speed."""
+    0), IMU samples a NaN yaw rate and odometry twists an infinite speed.
+    ``odom_twist`` (odometry wheels): the pose dead-reckoned from the
+    wheels as a diff-drive controller does (second-order Runge-Kutta) and
+    the twist "body" (REP 105), "odom" (in the odom frame), "zero" (a
+    driver that fills only the pose), "crab" (a lateral speed of half the
+    forward one in the body), "partial" (every 50th twist zero), "reset"
+    (only the pose, reset to the origin halfway) or "odom_unchecked" (in
+    the odom frame, the pose left at the origin); None: the pose at the
+    origin, a body twist."""
     from rosbags.rosbag1 import Writer as Writer1
     from rosbags.rosbag2 import StoragePlugin
     from rosbags.rosbag2 import Writer
@@ -102,15 +110,33 @@ def _write_bag(path, log, wheels="joints", imu_axis="z", tf_lever=None, no_fix_e
             vl, vr = e.ticks_left[1:] / (r.ticks_per_meter_left * dt), e.ticks_right[1:] / (r.ticks_per_meter_right * dt)
             v, om = 0.5 * (vl + vr), (vr - vl) / r.track_width
             P, Tw = T["geometry_msgs/msg/PoseWithCovariance"], T["geometry_msgs/msg/TwistWithCovariance"]
+            px = py = th = 0.0
             for k, (t, vi, wi) in enumerate(zip(e.t[1:], v, om)):
                 if nan_every and k % nan_every == 5:
                     vi = np.inf
+                lin = (vi, 0.0)
+                if odom_twist is not None:
+                    if odom_twist == "reset" and k == len(v) // 2:
+                        px = py = th = 0.0          # the driver restarts: its pose from the origin again
+                    px += vi * dt[k] * np.cos(th + 0.5 * wi * dt[k])
+                    py += vi * dt[k] * np.sin(th + 0.5 * wi * dt[k])
+                    th += wi * dt[k]
+                    lin = {"body": (vi, 0.0), "odom": (vi * np.cos(th), vi * np.sin(th)), "zero": (0.0, 0.0),
+                           "crab": (vi, 0.5 * vi), "reset": (0.0, 0.0), "partial": (vi, 0.0),
+                           "odom_unchecked": (vi, 0.0)}[odom_twist]
+                    if odom_twist in ("zero", "reset") or (odom_twist == "partial" and k % 50 == 7):
+                        lin, wi = (0.0, 0.0), 0.0
+                    if odom_twist == "odom_unchecked":
+                        lin, px, py, th = (vi * np.cos(th), vi * np.sin(th)), 0.0, 0.0, th
                 msg = T["nav_msgs/msg/Odometry"](
                     header=header(t), child_frame_id="base_link",
-                    pose=P(pose=T["geometry_msgs/msg/Pose"](position=T["geometry_msgs/msg/Point"](x=0.0, y=0.0, z=0.0),
-                                                           orientation=Q(x=0.0, y=0.0, z=0.0, w=1.0)),
+                    pose=P(pose=T["geometry_msgs/msg/Pose"](position=T["geometry_msgs/msg/Point"](x=px, y=py, z=0.0),
+                                                           orientation=(Q(x=0.0, y=0.0, z=0.0, w=1.0)
+                                                                        if odom_twist == "odom_unchecked" else
+                                                                        Q(x=0.0, y=0.0, z=np.sin(0.5 * th),
+                                                                          w=np.cos(0.5 * th)))),
                            covariance=np.zeros(36)),
-                    twist=Tw(twist=T["geometry_msgs/msg/Twist"](linear=V3(x=vi, y=0.0, z=0.0),
+                    twist=Tw(twist=T["geometry_msgs/msg/Twist"](linear=V3(x=lin[0], y=lin[1], z=0.0),
                                                                angular=V3(x=0.0, y=0.0, z=wi)),
                              covariance=np.zeros(36)))
                 for c in conns:
@@ -311,6 +337,127 @@ def test_a_fused_odometry_is_not_taken_for_the_wheels(tmp_path):
     assert any("picked /diff_drive_controller/odom" in n for n in log.notes)
 
 
+@pytest.mark.parametrize("twist", ["odom", "zero", "crab", "partial", "reset", "odom_unchecked"])
+def test_an_odometry_twist_in_the_odom_frame_or_a_pose_alone_gives_the_body_speeds(tmp_path, twist):
+    """REP 105 puts Odometry's twist in child_frame_id. A driver that fills
+    only the pose (every twist zero) imported as a robot standing still, and
+    one that writes the twist in the odom frame as speeds scaled by the
+    cosine of the heading. The pose, dead-reckoned as a diff-drive controller
+    does, gives the body's speeds back (another scenario and seed than the
+    other odometry bags), also where only some twists are zero, and leaves a
+    pose reset out; a twist with a lateral speed no heading explains, or
+    one whose frame a pose that never moves cannot tell, is a warning."""
+    src = simulate(yard(60.0), 17)
+    e, r = src.encoders, src.robot
+    dt = np.diff(e.t)
+    vl, vr = e.ticks_left[1:] / (r.ticks_per_meter_left * dt), e.ticks_right[1:] / (r.ticks_per_meter_right * dt)
+    _write_bag(tmp_path / twist, src, wheels="odometry", odom_twist=twist, tf_lever=r.gps_lever_arm)
+    log = import_rosbag(tmp_path / twist, track_width=r.track_width)
+    ws = log.wheel_speeds
+    if twist == "odom":
+        np.testing.assert_allclose(ws.t, e.t[1:], atol=1e-9, rtol=0)
+        np.testing.assert_allclose(ws.v_left, vl, atol=1e-9)
+        np.testing.assert_allclose(ws.v_right, vr, atol=1e-9)
+        assert any("twist is in the odom frame" in n for n in log.notes)
+    elif twist == "zero":
+        # each interval between two poses: the twist of the later message, at the midpoint
+        np.testing.assert_allclose(ws.t, 0.5 * (e.t[1:-1] + e.t[2:]), atol=1e-9, rtol=0)
+        np.testing.assert_allclose(ws.v_left, vl[1:], atol=1e-6)
+        np.testing.assert_allclose(ws.v_right, vr[1:], atol=1e-6)
+        assert any("every twist is zero while the pose's wheels travel" in n for n in log.notes)
+    elif twist == "partial":
+        # a probe: 2 % of the twists zero while the pose moved gave scale factors z -18 with no word.
+        # Message m's twist is interval m's mean (e.t[m], e.t[m + 1]); a placeholder's row comes from the
+        # pose's step over that interval, at its midpoint
+        m = np.arange(len(vl))
+        # (a twist of 0 where the robot stands: its pose does not move either)
+        ph = (m % 50 == 7) & (m > 0) & (np.abs(vl) + np.abs(vr) > 0)
+        want_t = np.where(ph, 0.5 * (e.t[m] + e.t[m + 1]), e.t[1:])
+        np.testing.assert_allclose(ws.t, want_t, atol=1e-9, rtol=0)
+        np.testing.assert_allclose(ws.v_left, vl, atol=1e-6)
+        np.testing.assert_allclose(ws.v_right, vr, atol=1e-6)
+        assert any(f"{int(ph.sum())} messages with a zero twist while the pose moved: {int(ph.sum())} of those" in n
+                   for n in log.notes)
+    elif twist == "reset":
+        # the interval across the driver's reset is left out, every other one as "zero"'s
+        k = len(vl) // 2
+        np.testing.assert_allclose(ws.v_left, np.delete(vl[1:], k - 1), atol=1e-6)
+        assert any("1 pose jump(s) (a driver resetting it?) left out" in n for n in log.notes)
+    elif twist == "crab":
+        np.testing.assert_allclose(ws.v_left, vl, atol=1e-9)
+        assert sum("lateral speed" in w and "only its forward speed" in w for w in log.warnings) == 1
+        return
+    else:
+        # the yard turns every way: its odom-frame twist's lateral speed is most of it, said as such
+        # (test_a_twist_whose_frame_cannot_be_checked_is_said: one heading near x)
+        assert sum("linear.x is used" in w for w in log.warnings) == 1
+        return
+    assert not any("lateral speed" in w for w in log.warnings)
+    est = estimate(log, Method.batch, Schedule(None))
+    for got, true, sd in zip(est.mean[-1, 8:11], src.truth_scales, est.sigma[-1, 8:11]):
+        assert abs(got - true) < 3.5 * sd
+
+
+def _twist_rows(n=1200, hz=20.0, heading=0.1, spin=False, seed=3):
+    """A body moving (or pivoting, ``spin``) with a weaving speed: times
+    (n,) [s], forward speed [m/s], yaw rate [rad/s], and the pose (x, y,
+    yaw) dead-reckoned from them; the heading stays within ``heading`` rad
+    of the x axis."""
+    rng = np.random.default_rng(seed)
+    t = np.arange(n) / hz
+    v = np.zeros(n) if spin else 0.8 + 0.3 * np.sin(0.3 * t) + 0.01 * rng.standard_normal(n)
+    yaw = (1.2 * t) if spin else heading * np.sin(0.2 * t)
+    om = np.gradient(yaw, t)
+    x, y = np.cumsum(v * np.cos(yaw)) / hz, np.cumsum(v * np.sin(yaw)) / hz
+    return t, v, om, x, y, yaw
+
+
+def test_a_twist_whose_frame_cannot_be_checked_is_said():
+    """An odom-frame twist heading within 6 degrees of x beside a pose left
+    at the origin: its lateral speed is a tenth of the forward one, under
+    the 20 % that makes a twist not a diff drive's, and linear.x is the
+    speed times cos(heading), 0.5 % short (a probe's: 2 %, scale factors z
+    -9, with no word). Said; a body twist with no lateral speed is not."""
+    from odomgraph.io.importers.rosbag import _body_twist
+    t, v, om, x, y, yaw = _twist_rows()
+    notes, warnings = [], []
+    zero = np.zeros_like(t)
+    _body_twist("/odom", t, v * np.cos(yaw), v * np.sin(yaw), om, zero, zero, zero, 0.5, notes, warnings)
+    assert len(warnings) == 1 and "the pose does not move, so the twist's frame cannot be checked" in warnings[0]
+    warnings.clear()
+    _body_twist("/odom", t, v, zero, om, zero, zero, zero, 0.5, notes, warnings)
+    assert warnings == [] and notes == []
+    # with the pose the driver integrated, the same twist is rotated into the body
+    tt, fwd, w = _body_twist("/odom", t, v * np.cos(yaw), v * np.sin(yaw), om, x, y, yaw, 0.5, notes, warnings)
+    np.testing.assert_allclose(fwd, v, atol=1e-12)
+    assert warnings == [] and any("the twist is in the odom frame" in n for n in notes)
+
+
+def test_a_pose_only_driver_pivoting_in_place_gives_its_yaw_rate():
+    """A pose-only driver (every twist zero) whose robot pivots in place (a
+    track calibration run): the pose moves no metre, but its wheels travel
+    track / 2 x the turn; the yaw rate comes from the pose (a probe: imported
+    as standing still, the track left at its prior). A pose whose yaw stays
+    0 while the robot drives a weave is said (its steps go sideways), and a
+    NaN pose is left out, not the whole pose."""
+    from odomgraph.io.importers.rosbag import _body_twist
+    t, v, om, x, y, yaw = _twist_rows(spin=True)
+    zero = np.zeros_like(t)
+    notes, warnings = [], []
+    tt, fwd, w = _body_twist("/odom", t, zero, zero, zero, x, y, yaw, 0.5, notes, warnings)
+    np.testing.assert_allclose(w, 1.2, atol=1e-9)
+    np.testing.assert_allclose(fwd, 0.0, atol=1e-12)
+    assert warnings == [] and "every twist is zero while the pose's wheels travel" in notes[0]
+    t, v, om, x, y, yaw = _twist_rows(heading=0.8)
+    notes = []
+    _body_twist("/odom", t, zero, zero, zero, x, y, zero, 0.5, notes, warnings)
+    assert len(warnings) == 1 and "the pose steps sideways to its own heading" in warnings[0]
+    x[100], warnings = np.nan, []
+    tt, fwd, w = _body_twist("/odom", t, zero, zero, zero, x, y, yaw, 0.5, notes, warnings)
+    assert warnings == [] and tt.size == t.size - 2 and any("1 messages with a pose that is not" in n for n in notes)
+    assert np.all(np.isfinite(fwd)) and np.abs(fwd - np.interp(tt, t, v)).max() < 0.05
+
+
 def test_joint_names_are_found_and_a_missing_radius_is_said(bag):
     path, src = bag
     log = import_rosbag(path, wheel_radius=R_WHEEL, track_width=src.robot.track_width)
@@ -347,6 +494,20 @@ def test_the_jackal_bag_calibrates_ratio_and_track_and_holds_the_common_scale(tm
     assert h["kind"] == "gyro" and h["calibrated"] < h["nominal"]
     assert any("scale_common is not determined" in w for w in rep["warnings"])
     assert not any("calibration window" in w for w in rep["warnings"])
+
+
+def test_the_jackal_ekf_s_nis_line_blames_the_model_not_the_sigma():
+    """The Jackal's EKF encoder NIS is about 9x its dimension, while the
+    wheel rows scatter a quarter of robot.toml's sigma from one to the
+    next: the line says the sigma is not too small and names the model (a
+    skid-steer's turns), not the usual list of three causes."""
+    log = import_rosbag(JACKAL, track_width=0.37)
+    est = estimate(log, Method.ekf)
+    f = est.noise_scales["encoders"]["measured"]
+    assert 0.2 < f < 0.3 and est.noise_scales["encoders"]["applied"] == 1.0
+    line = [w for w in est.warnings if w.startswith("encoders: mean NIS")]
+    assert len(line) == 1 and f"the rows scatter {f:.2g}x robot.toml's sigma" in line[0]
+    assert "the sigma is not too small: motion the model does not hold (a skid-steer's turns" in line[0]
 
 
 MOUNTINGS = [("joints", "x", True), ("odometry", "y", False), ("twist", "x", False), ("twist", "-z", True)]

@@ -24,12 +24,14 @@ JOINTS = ["left_wheel_joint", "right_wheel_joint"]
 
 def _bag(path: Path, log, order=lambda k: JOINTS, arm_every=0, fix=None, imu_cov=0.0, imu_rate=None,
          stamp=lambda t: t, positions=True, velocities=False, wrap=False, arm_names=("arm_shoulder", "arm_elbow"), fix_stamp=None,
-         arm_position=(0.1, 0.2), restart=None):
+         arm_position=(0.1, 0.2), restart=None, sides=None):
     """A ROS 2 bag of ``log``: JointState wheels (joint names per message
     from ``order(k)``; every ``arm_every``-th message an arm's JointState on
     the same topic; ``wrap``: positions modulo 2 pi), NavSatFix (``fix(k, lat, lon, cov)`` may change a fix),
     Imu with angular_velocity_covariance[0] = ``imu_cov`` and the yaw rate
-    ``imu_rate(t, omega)`` (default: omega on z); header stamps ``stamp(t)``."""
+    ``imu_rate(t, omega)`` (default: omega on z); header stamps ``stamp(t)``.
+    ``sides``: {joint name: (wheel joint it copies, offset [rad] (N,))}, the
+    joints a skid-steer base publishes (``order`` names them)."""
     from rosbags.rosbag2 import Writer
     from rosbags.typesys import Stores, get_typestore
     ts = get_typestore(Stores.ROS2_HUMBLE)
@@ -48,6 +50,8 @@ def _bag(path: Path, log, order=lambda k: JOINTS, arm_every=0, fix=None, imu_cov
     e, r = log.encoders, log.robot
     angles = {"left_wheel_joint": np.cumsum(e.ticks_left) / r.ticks_per_meter_left / R_WHEEL,
               "right_wheel_joint": np.cumsum(e.ticks_right) / r.ticks_per_meter_right / R_WHEEL}
+    if sides is not None:
+        angles.update({k: angles[src] + off for k, (src, off) in sides.items()})
     if wrap:
         angles = {k: (v + np.pi) % (2 * np.pi) - np.pi for k, v in angles.items()}
     if restart is not None:
@@ -134,6 +138,46 @@ def test_joints_are_looked_up_by_name_in_every_message(sim, clean, tmp_path):
     np.testing.assert_array_equal(given.wheel_speeds.v_right, clean.wheel_speeds.v_right)
     with pytest.raises(LogFormatError, match="joints 'l'/'r' not in"):
         _imp(tmp_path / "arm", left_joint="l", right_joint="r")
+
+
+@pytest.mark.parametrize("wrap", [False, True])
+def test_a_skid_steer_s_four_wheel_joints_are_averaged_per_side(sim, clean, tmp_path, wrap):
+    """A Husky/Jackal/Warthog publishes front_ and rear_ wheel joints: the
+    import refused them ("cannot tell which joints"), though a diff-drive
+    controller takes each side's mean. Here the rear wheels turn with the
+    front ones plus an encoder's own noise (0.003 rad), in another order per
+    message; reported modulo 2 pi too (each joint unwrapped before the mean:
+    the mean of two angles either side of the wrap is half a turn off). The
+    speeds equal the clean bag's to the noise; three joints on one side and
+    one on the other stay refused."""
+    rng = np.random.default_rng(23)
+    n = len(sim.encoders.t)
+    four = {f"{end}_{side}_wheel": (f"{side}_wheel_joint", (0.0 if end == "front" else rng.normal(0.0, 0.003, n)))
+            for end in ("front", "rear") for side in ("left", "right")}
+    names = list(four)
+    log = _imp(_bag(tmp_path / "four", sim, sides=four, wrap=wrap,
+                    order=lambda k: names[::-1] if k % 3 else ["caster_joint", *names]))
+    assert any("2 wheel joints a side (front_left_wheel, rear_left_wheel | front_right_wheel, rear_right_wheel)" in m
+               for m in log.notes), log.notes
+    # the mean of two angles one with 0.003 rad noise: speed noise <= 4 sigma x 0.5 x sqrt(2) / dt x radius
+    tol = 4 * 0.5 * np.sqrt(2) * 0.003 / np.diff(sim.encoders.t).min() * R_WHEEL
+    np.testing.assert_allclose(log.wheel_speeds.v_left, clean.wheel_speeds.v_left, atol=tol)
+    np.testing.assert_allclose(log.wheel_speeds.v_right, clean.wheel_speeds.v_right, atol=tol)
+    assert np.sqrt(np.mean((log.wheel_speeds.v_left - clean.wheel_speeds.v_left) ** 2)) < tol / 3
+    assert (sum("wraps at a full turn" in m for m in log.notes) == 4) == wrap
+    three = {**four, "middle_left_wheel": ("left_wheel_joint", 0.0)}
+    with pytest.raises(LogFormatError, match="cannot tell which joints are the left and right wheels"):
+        _imp(_bag(tmp_path / "three", sim, sides=three, order=lambda k: list(three)))
+
+
+def test_wheels_that_never_move_are_said(sim, tmp_path):
+    """A driver that fills its wheel positions with zeros and no velocities
+    beside a GPS that moves: imported without a word before (a probe's
+    all-zero Odometry, the same); every estimate then reads a robot
+    standing still, so the import says so."""
+    log = _imp(_bag(tmp_path / "still", sim, positions=False))
+    assert sum("the wheels never move in its" in w for w in log.warnings) == 1
+    assert not any("never move" in w for w in _imp(_bag(tmp_path / "moves", sim)).warnings)
 
 
 def test_placeholder_positions_give_way_to_velocities(sim, tmp_path):

@@ -223,6 +223,10 @@ ENCODER_SCATTER_ABOVE = 1.25
 GYRO_WIDEN_ABOVE = 1.5
 #: Rows further apart than this many median periods end a run of rows (wheel_row_scale, gyro_row_scale).
 WHEEL_MAX_GAP = 2.0
+#: The largest factor wheel_row_scale solves for; a sigma further off is reported as at least this.
+ROW_FACTOR_CAP = 1e4
+#: Each sensor row_scales measures: the factor on its robot.toml sigma above which it is widened.
+ROW_WIDEN_ABOVE = {"encoders": WHEEL_WIDEN_ABOVE, "gyro": GYRO_WIDEN_ABOVE}
 
 
 def wheel_row_scale(log) -> float | None:
@@ -292,11 +296,8 @@ def _row_scale(clean, a: float, b: float) -> float | None:
     if med > RATE_SLACK / ENCODER_MIN_HZ:
         # the motion's own changes between rows pass for noise (a probe's stop-and-go at 5 Hz: 3.6-6.1)
         return None
-    gap_ok = dt <= WHEEL_MAX_GAP * med
-    if clean.encoders is not None:
-        ok = gap_ok[2:] & gap_ok[1:-1] & gap_ok[:-2]     # the rows' own intervals
-    else:
-        ok = gap_ok[1:] & gap_ok[:-1]                   # between the rows
+    # encoder rows: the rows' own three intervals; speed rows: the two between them
+    ok = _gap_free(dt, 3 if clean.encoders is not None else 2)
     for v, moving, q in rows:
         s2 = (a + b * np.abs(v)) ** 2
         d2 = v[2:] - 2.0 * v[1:-1] + v[:-2]
@@ -308,7 +309,7 @@ def _row_scale(clean, a: float, b: float) -> float | None:
     if d2.size < MIN_COUNT:
         return None
     if (clean.encoders is not None and np.median(s / (s + q)) < ENCODER_EQ41_SHARE
-            and 1.4826 * np.median(np.abs(d2) / np.sqrt(q)) < ENCODER_OVER_QUANTISATION):
+            and _mad(d2 / np.sqrt(q)) < ENCODER_OVER_QUANTISATION):
         # The ticks' quantisation is most of the rows' noise: its pattern at a
         # steady speed (counts alternating 1, 2, 1, 2) is not the uniform error
         # the variance assumes, and its lattice fools the MAD; solving eq. 41's
@@ -321,12 +322,14 @@ def _row_scale(clean, a: float, b: float) -> float | None:
     ad = np.abs(d2)
 
     def scatter(g: float) -> float:
-        return float(1.4826 * np.median(ad / np.sqrt(g * g * s + q)))
+        return _mad(ad / np.sqrt(g * g * s + q))
     plain = scatter(1.0)
     if plain <= ENCODER_SCATTER_ABOVE or not np.any(q > 0) or not np.any(s > 0):
         return plain     # no quantisation: plain is the factor itself (scatter(g) = plain / g)
-    # scatter(g) falls as g grows; bisect in log g on [1, 1e4]
-    lo, hi = 1.0, 1e4
+    # scatter(g) falls as g grows; bisect in log g on [1, ROW_FACTOR_CAP]
+    lo, hi = 1.0, ROW_FACTOR_CAP
+    if scatter(hi) > 1.0:
+        return ROW_FACTOR_CAP     # said as "at least" (pipeline._row_scale_line)
     for _ in range(50):
         mid = np.sqrt(lo * hi)
         lo, hi = (mid, hi) if scatter(mid) > 1.0 else (lo, mid)
@@ -368,12 +371,24 @@ def gyro_row_scale(log) -> float | None:
     dt = np.diff(g.t)
     if dt.size < 2 or not 0.0 < float(np.median(dt)) <= RATE_SLACK / GYRO_MIN_HZ:
         return None
-    gap_ok = dt <= WHEEL_MAX_GAP * float(np.median(dt))
-    d2 = (g.omega[2:] - 2.0 * g.omega[1:-1] + g.omega[:-2])[gap_ok[1:] & gap_ok[:-1]]
+    d2 = (g.omega[2:] - 2.0 * g.omega[1:-1] + g.omega[:-2])[_gap_free(dt, 2)]
     d2 = d2[np.isfinite(d2)]
     if d2.size < MIN_COUNT:
         return None
-    return float(1.4826 * np.median(np.abs(d2)) / (np.sqrt(6.0) * log.robot.gyro_sigma))
+    return _mad(d2) / (np.sqrt(6.0) * log.robot.gyro_sigma)
+
+
+def _gap_free(dt: np.ndarray, span: int) -> np.ndarray:
+    """(len(dt) - span + 1,) True where ``span`` consecutive intervals
+    ``dt`` [s] are each at most WHEEL_MAX_GAP median intervals: a second
+    difference across a gap mixes two stretches of motion."""
+    ok = dt <= WHEEL_MAX_GAP * float(np.median(dt))
+    return np.all([ok[i:ok.size - span + 1 + i] for i in range(span)], axis=0)
+
+
+def _mad(x: np.ndarray) -> float:
+    """The robust scale of ``x`` about 0 (1.4826 median |x|: a Gaussian's sigma)."""
+    return float(1.4826 * np.median(np.abs(x)))
 
 
 def row_scales(log) -> dict[str, float]:
@@ -384,24 +399,34 @@ def row_scales(log) -> dict[str, float]:
     return {k: v for k, v in out.items() if v is not None}
 
 
+def applied_row_scale(sensor: str, f: float | None) -> float:
+    """The factor a run applies to ``sensor``'s ("encoders", "gyro") sigma
+    for its measured row scale ``f``: f above ROW_WIDEN_ABOVE, else 1 (a
+    sigma is never narrowed)."""
+    return f if f is not None and f > ROW_WIDEN_ABOVE[sensor] else 1.0
+
+
+def with_row_sigmas(robot, factors: dict[str, float]):
+    """``robot`` with its [encoders] sigma (a, b) and [gyro] sigma
+    multiplied by ``factors["encoders"]`` and ``factors["gyro"]`` (missing:
+    1). The one place the row sensors' fields are named: the widened run
+    (widened_rows) and calibrate's write-back (pipeline._with_fitted_noise)."""
+    fe, fg = factors.get("encoders", 1.0), factors.get("gyro", 1.0)
+    if fe != 1.0:
+        robot = robot.with_(encoder_sigma=tuple(v * fe for v in robot.encoder_sigma))
+    if fg != 1.0:
+        robot = robot.with_(gyro_sigma=robot.gyro_sigma * fg)
+    return robot
+
+
 def widened_rows(log, scales: dict[str, float | None]):
     """The log with robot.toml's [encoders] and [gyro] sigma multiplied by
     their ``scales`` (row_scales, or the factors a run applied) where they
-    are above WHEEL_WIDEN_ABOVE / GYRO_WIDEN_ABOVE (never narrowed)."""
-    log = widened_wheels(log, scales.get("encoders"))
-    f = scales.get("gyro")
-    if f is not None and f > GYRO_WIDEN_ABOVE:
-        log = log.with_(robot=log.robot.with_(gyro_sigma=log.robot.gyro_sigma * f))
-    return log
-
-
-def widened_wheels(log, f: float | None):
-    """The log with robot.toml's [encoders] sigma (a, b) multiplied by ``f``
-    when it is above WHEEL_WIDEN_ABOVE (never narrowed)."""
-    if f is None or f <= WHEEL_WIDEN_ABOVE:
+    are above ROW_WIDEN_ABOVE (applied_row_scale)."""
+    factors = {k: applied_row_scale(k, f) for k, f in scales.items() if k in ROW_WIDEN_ABOVE}
+    if all(f == 1.0 for f in factors.values()):
         return log
-    a, b = log.robot.encoder_sigma
-    return log.with_(robot=log.robot.with_(encoder_sigma=(a * f, b * f)))
+    return log.with_(robot=with_row_sigmas(log.robot, factors))
 
 
 #: The largest lag-1 correlation credited: a constant offset is correlation 1,

@@ -6,8 +6,10 @@ Topics are picked by their type when the choice is unambiguous, or given:
 * wheels, one of
   - ``sensor_msgs/JointState``: positions [rad] are differenced and converted
     with the wheel radius (speeds stamped at the interval midpoint), or
-    velocities [rad/s] are used when there are no positions. The two wheel
-    joints are found by name when exactly two joints look like wheels;
+    velocities [rad/s] are used when there are no positions. The wheel
+    joints are found by name (left/right, "wheel" first); a skid-steer's
+    front and rear wheels on a side are averaged, as a diff-drive controller
+    does;
   - ``nav_msgs/Odometry`` or ``geometry_msgs/TwistStamped``: the body twist
     (v, omega) becomes per-wheel surface speeds through the nominal track,
     v -/+ omega b/2. This assumes the odometry came from the wheels alone
@@ -388,20 +390,66 @@ def _rotation(x: float, y: float, z: float, w: float) -> np.ndarray:
                      [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)]])
 
 
-def _wheel_joints(bag: Path, topic: str, names: list[str], left: str | None, right: str | None) -> tuple[str, str]:
-    """The two wheel joints: the given ones, or the two names that look like wheels (left/right in them)."""
+def _wheel_joints(bag: Path, topic: str, names: list[str], left: str | None,
+                  right: str | None) -> tuple[tuple[str, ...], tuple[str, ...]]:
+    """Each side's wheel joints: the given ones, or the names that look like
+    wheels (left/right in them), as many on each side: a skid-steer base
+    (Husky, Jackal, Warthog) publishes front_ and rear_ wheels, and a
+    diff-drive controller takes each side's mean (_side_means)."""
     if left and right:
         if left not in names or right not in names:
             raise LogFormatError(bag, f"{topic}: joints {left!r}/{right!r} not in {names} "
                                       "(--left-joint/--right-joint)")
-        return left, right
+        return (left,), (right,)
     wheels = [n for n in names if "wheel" in n.lower()] or names
-    ls = [n for n in wheels if "left" in n.lower()]
-    rs = [n for n in wheels if "right" in n.lower()]
-    if len(ls) == 1 and len(rs) == 1:
-        return left or ls[0], right or rs[0]
+    ls = [n for n in wheels if "left" in n.lower() and "right" not in n.lower()]
+    rs = [n for n in wheels if "right" in n.lower() and "left" not in n.lower()]
+    if left:
+        ls = [left] if left in names else []
+    if right:
+        rs = [right] if right in names else []
+    if ls and len(ls) == len(rs) <= MAX_WHEELS_PER_SIDE:
+        return tuple(ls), tuple(rs)
     raise LogFormatError(bag, f"{topic}: cannot tell which joints are the left and right wheels among {names}; "
                               "give --left-joint and --right-joint")
+
+
+#: Most wheel joints taken on one side (a six-wheeled rover's three).
+MAX_WHEELS_PER_SIDE = 3
+
+
+def _side_means(rows: list, sides: tuple[tuple[str, ...], tuple[str, ...]], topic: str, notes: list) -> list:
+    """Wheel rows (t, left position, right position, left velocity, right
+    velocity) from rows holding each side's joints' values ((t, left
+    positions (k,), right positions (k,), left velocities, right
+    velocities), k joints a side, empty arrays where the message had none):
+    each side's mean, as a diff-drive controller takes it for several wheels
+    a side. Positions are unwrapped joint by joint first (_unwrap_angle):
+    the mean of two angles reported modulo 2 pi, one just past the wrap, is
+    half a turn off."""
+    if not rows:
+        return []
+    if all(len(side) == 1 for side in sides):
+        return [(t, *(a[0] if a.size else np.nan for a in vals)) for t, *vals in rows]
+    out = []
+    cols = []
+    for c, side in enumerate(("left", "right")):
+        pos = [r[1 + c] for r in rows]
+        if all(p.size for p in pos):
+            p = np.array(pos)
+            p = np.stack([_unwrap_angle(p[:, j], topic, f"{side} ({sides[c][j]})", notes)
+                          for j in range(p.shape[1])], axis=1)
+            cols.append(p.mean(axis=1))
+        else:
+            cols.append(np.full(len(rows), np.nan))
+    for c in (0, 1):
+        vel = [r[3 + c] for r in rows]
+        cols.append(np.array([v.mean() for v in vel]) if all(v.size for v in vel) else np.full(len(rows), np.nan))
+    notes.append(f"{topic}: {len(sides[0])} wheel joints a side ({', '.join(sides[0])} | {', '.join(sides[1])}): "
+                 "each side is their mean, as a diff-drive controller takes it")
+    for k, r in enumerate(rows):
+        out.append((r[0], *(float(col[k]) for col in cols)))
+    return out
 
 
 def _publisher(msg: tuple) -> tuple:
@@ -411,8 +459,8 @@ def _publisher(msg: tuple) -> tuple:
     return names, pos.size == len(names), vel.size == len(names)
 
 
-def _frozen_publishers(msgs: list, joints: tuple[str, str]) -> set[tuple]:
-    """The publishers (_publisher) whose messages hold both wheel joints at
+def _frozen_publishers(msgs: list, joints: tuple[str, ...]) -> set[tuple]:
+    """The publishers (_publisher) whose messages hold every wheel joint at
     one value all along, when another publisher's move them: a
     joint_state_publisher beside the wheel driver sends every joint at its
     default (0), and interleaved with the driver's those rows read as
@@ -421,11 +469,11 @@ def _frozen_publishers(msgs: list, joints: tuple[str, str]) -> set[tuple]:
     values: dict[tuple, list] = {}
     for m in msgs:
         _, names, pos, vel = m
-        if joints[0] in names and joints[1] in names:
-            idx = [names.index(joints[0]), names.index(joints[1])]
+        if all(j in names for j in joints):
+            idx = [names.index(j) for j in joints]
             # positions and velocities, where filled: a driver may fill positions with zeros
             values.setdefault(_publisher(m), []).append(np.concatenate(
-                [a[idx] if a.size == len(names) else np.zeros(2) for a in (pos, vel)]))
+                [a[idx] if a.size == len(names) else np.zeros(len(idx)) for a in (pos, vel)]))
     if len(values) < 2:
         return set()
     still = {k for k, v in values.items() if not np.any(np.ptp(np.array(v), axis=0) > 0.0)}
@@ -436,19 +484,20 @@ def _joint_rows(bag, topic: str, msgs: list, left: str | None, right: str | None
                 not_finite: dict) -> list[tuple]:
     """Wheel rows (t, left position, right position, left velocity, right
     velocity; NaN where a message has none) from a JointState topic's
-    messages ((t, names, positions, velocities) each). The two wheel joints
-    are the given ones, or the left/right pair found in the most messages,
+    messages ((t, names, positions, velocities) each). The wheel joints are
+    the given ones, or the left/right sides found in the most messages,
     joints named "wheel" first: a mobile manipulator's gripper publishing on
-    the same topic may come first. Joints are looked up by name in every
-    message (a driver may reorder them); messages without them (another
-    publisher's) are skipped and counted."""
+    the same topic may come first; several a side are averaged (_side_means).
+    Joints are looked up by name in every message (a driver may reorder
+    them); messages without them (another publisher's) are skipped and
+    counted."""
     if not msgs:
         raise LogFormatError(bag, f"{topic}: no JointState message")
     counts: dict[tuple, int] = {}
     for _, names, _, _ in msgs:
         counts[names] = counts.get(names, 0) + 1
     if left and right:
-        joints = (left, right)
+        sides = ((left,), (right,))
         if not any(left in n and right in n for n in counts):
             raise LogFormatError(bag, f"{topic}: joints {left!r}/{right!r} not in "
                                       f"{sorted({j for n in counts for j in n})} (--left-joint/--right-joint)")
@@ -460,37 +509,39 @@ def _joint_rows(bag, topic: str, msgs: list, left: str | None, right: str | None
             except LogFormatError as exc:
                 error = exc
                 continue
-            pairs[pair] = sum(c for n, c in counts.items() if pair[0] in n and pair[1] in n)
+            pairs[pair] = sum(c for n, c in counts.items() if all(j in n for j in pair[0] + pair[1]))
         if not pairs:
             raise error
-        joints = max(pairs, key=lambda pr: ("wheel" in pr[0].lower() and "wheel" in pr[1].lower(), pairs[pr]))
+        sides = max(pairs, key=lambda pr: (all("wheel" in j.lower() for j in pr[0] + pr[1]), pairs[pr]))
+    joints = sides[0] + sides[1]
     rows, other = [], 0
     frozen = _frozen_publishers(msgs, joints)
     if frozen:
         n = sum(1 for m in msgs if _publisher(m) in frozen)
         notes.append(f"{topic}: {n} messages from another publisher (its names {list(next(iter(frozen))[0])}) that "
                      f"hold the wheel joints at a constant value (joint_state_publisher's defaults?) skipped")
+    empty = np.zeros(0)
     for m in msgs:
         stamp, names, pos, vel = m
         if frozen and _publisher(m) in frozen:
             continue
-        if joints[0] not in names or joints[1] not in names:
+        if not all(j in names for j in joints):
             other += 1
             continue
-        il, ir = names.index(joints[0]), names.index(joints[1])
+        il, ir = [names.index(j) for j in sides[0]], [names.index(j) for j in sides[1]]
         # arrays of another length than the names carry nothing for these joints
-        pos = pos if pos.size == len(names) else np.zeros(0)
-        vel = vel if vel.size == len(names) else np.zeros(0)
-        used = pos[[il, ir]] if pos.size else (vel[[il, ir]] if vel.size else np.zeros(2))
+        pos = pos if pos.size == len(names) else empty
+        vel = vel if vel.size == len(names) else empty
+        used = pos[il + ir] if pos.size else (vel[il + ir] if vel.size else np.zeros(2))
         if not np.all(np.isfinite(used)):
             not_finite[topic] = not_finite.get(topic, 0) + 1
             continue
-        rows.append((stamp, *(pos[[il, ir]] if pos.size else (np.nan, np.nan)),
-                     *(vel[[il, ir]] if vel.size else (np.nan, np.nan))))
+        rows.append((stamp, *(pos[ix] if pos.size else empty for ix in (il, ir)),
+                     *(vel[ix] if vel.size else empty for ix in (il, ir))))
     if other:
         notes.append(f"{topic}: {other} messages without the wheel joints {list(joints)} skipped (another publisher "
                      "on the topic)")
-    return rows
+    return _side_means(rows, sides, topic, notes)
 
 
 def import_rosbag(bag: Path | str, wheel_topic: str | None = None, left_joint: str | None = None,
@@ -619,7 +670,12 @@ def import_rosbag(bag: Path | str, wheel_topic: str | None = None, left_joint: s
                         if not (np.isfinite(tw.linear.x) and np.isfinite(tw.angular.z)):
                             not_finite[conn.topic] = not_finite.get(conn.topic, 0) + 1
                             continue
-                        wheels.append((stamp, tw.linear.x, tw.angular.z, np.nan, np.nan))
+                        # Odometry's pose too (x, y, yaw): a driver may fill only the pose, or
+                        # put the twist in the odom frame (_body_twist)
+                        pose = ((msg.pose.pose.position.x, msg.pose.pose.position.y,
+                                 _yaw(msg.pose.pose.orientation)) if kind == "odometry" else (np.nan,) * 3)
+                        wheels.append((stamp, tw.linear.x, tw.angular.z, np.nan, np.nan,
+                                       tw.linear.y if np.isfinite(tw.linear.y) else 0.0, *pose))
                 elif conn.topic in ticks:
                     ticks[conn.topic].append((stamp, int(msg.data)))
                 elif conn.topic == chosen["gps"]:
@@ -680,7 +736,11 @@ def import_rosbag(bag: Path | str, wheel_topic: str | None = None, left_joint: s
         # the wheels' speeds, for the IMU axis check below
         ws = WheelSpeeds(enc.t[1:], enc.ticks_left[1:] / (tpm[0] * dt), enc.ticks_right[1:] / (tpm[1] * dt))
     else:
-        ws = _wheel_speeds(bag, chosen["wheels"], kind, wheels, wheel_radius, track_width, notes)
+        ws = _wheel_speeds(bag, chosen["wheels"], kind, wheels, wheel_radius, track_width, notes, warnings)
+    if not (np.any(ws.v_left) or np.any(ws.v_right)):
+        # a driver that fills nothing (a probe: twist and pose all zero beside a GPS that moved 50 m)
+        warnings.append(f"{chosen['wheels'] or 'the tick counters'}: the wheels never move in its {len(ws.t)} rows: "
+                        "every estimate reads a robot standing still (a driver that fills nothing?)")
     if kind not in ("joints", "ticks"):
         notes.append(f"wheels from the {'odometry twist' if kind == 'odometry' else 'TwistStamped'} of "
                      f"{chosen['wheels']} through the nominal track "
@@ -772,7 +832,7 @@ def _said_equal_stamps(topic, n_in: int, n_out: int, notes: list, warnings: list
     return False
 
 
-def _wheel_speeds(bag, topic, kind, rows, wheel_radius, track_width, notes) -> WheelSpeeds:
+def _wheel_speeds(bag, topic, kind, rows, wheel_radius, track_width, notes, warnings) -> WheelSpeeds:
     if len(rows) < 2:
         raise LogFormatError(bag, f"{topic}: fewer than two wheel messages")
     j = np.array(rows)
@@ -782,7 +842,8 @@ def _wheel_speeds(bag, topic, kind, rows, wheel_radius, track_width, notes) -> W
                                   "--stamps receive uses the bag's receive times")
     _said_equal_stamps(topic, len(j), len(t), notes)
     if kind != "joints":
-        v, om = a, b
+        _, vy, px, py, yaw = _increasing(j[:, 0], *(j[:, c] for c in range(5, 9)))
+        t, v, om = _body_twist(topic, t, a, vy, b, px, py, yaw, track_width, notes, warnings)
         return WheelSpeeds(t, v - 0.5 * track_width * om, v + 0.5 * track_width * om)
     positions = bool(np.all(np.isfinite(a)) and np.all(np.isfinite(b)))
     velocities = bool(np.all(np.isfinite(vl)) and np.all(np.isfinite(vr)))
@@ -805,6 +866,152 @@ def _wheel_speeds(bag, topic, kind, rows, wheel_radius, track_width, notes) -> W
     if velocities:
         return WheelSpeeds(t, vl * wheel_radius, vr * wheel_radius)
     raise LogFormatError(bag, f"{topic}: JointState has neither positions nor velocities for the wheels")
+
+
+#: An Odometry pose whose wheels travel this far [m] (translation and
+#: track / 2 x turning) while every twist is zero: a driver that fills only
+#: the pose (_body_twist).
+POSE_ONLY_M = 0.5
+#: A zero twist after a pose step of this much wheel travel [m]: a
+#: placeholder, not a robot at rest (_body_twist). A wheel odometry's pose
+#: does not move at rest; 2 mm missed a robot creeping at 3 cm/s at 20 Hz.
+POSE_STEP_M = 1e-4
+#: A pose step this many times the 99th percentile of the pose's speeds (plus
+#: POSE_JUMP_V / POSE_JUMP_W) is a jump, a driver resetting its pose, and left out.
+POSE_JUMP_TIMES = 3.0
+POSE_JUMP_V = 0.5
+POSE_JUMP_W = 1.0
+#: A twist whose lateral speed's rms is more than this share of its forward
+#: one: not a differential drive's body-frame twist (REP 105: the twist is in
+#: child_frame_id) (_body_twist).
+LATERAL_SHARE = 0.2
+#: The pose's heading that takes the lateral speed's rms below this share of
+#: itself: a twist in the odom frame (_body_twist).
+ODOM_FRAME_SHARE = 0.25
+#: A lateral speed above this share of the forward one, with a pose that
+#: does not move to tell the twist's frame, is said: an odom-frame twist
+#: heading near the x axis is scaled by cos(heading) (a probe: 0.12 m/s rms
+#: lateral, speeds 2 % short, scale factors z -9).
+LATERAL_UNCHECKED_SHARE = 0.02
+
+
+def _yaw(q) -> float:
+    """The yaw [rad] of a geometry_msgs/Quaternion about z (ZYX Euler angles)."""
+    return float(np.arctan2(2.0 * (q.w * q.z + q.x * q.y), 1.0 - 2.0 * (q.y * q.y + q.z * q.z)))
+
+
+def _rms(x: np.ndarray) -> float:
+    return float(np.sqrt(np.mean(np.square(x)))) if x.size else 0.0
+
+
+def _pose_speeds(t, px, py, yaw, track):
+    """Per interval between consecutive poses (K - 1,): the midpoint [s],
+    the body's forward and lateral speed [m/s] (the step rotated into the
+    body at the interval's mean heading) and yaw rate [rad/s], the wheels'
+    travel [m] (translation + track / 2 |turn|), and a jump mask
+    (POSE_JUMP_TIMES: a driver resetting its pose)."""
+    dt = np.diff(t)
+    dyaw = np.angle(np.exp(1j * np.diff(yaw)))
+    mid = yaw[:-1] + 0.5 * dyaw
+    dx, dy = np.diff(px), np.diff(py)
+    fwd = (np.cos(mid) * dx + np.sin(mid) * dy) / dt
+    side = (-np.sin(mid) * dx + np.cos(mid) * dy) / dt
+    om = dyaw / dt
+    travel = np.hypot(dx, dy) + 0.5 * track * np.abs(dyaw)
+    jump = np.zeros(dt.size, bool)
+    if dt.size:
+        v99, w99 = np.percentile(np.hypot(fwd, side), 99), np.percentile(np.abs(om), 99)
+        jump = ((np.hypot(fwd, side) > POSE_JUMP_TIMES * v99 + POSE_JUMP_V)
+                | (np.abs(om) > POSE_JUMP_TIMES * w99 + POSE_JUMP_W))
+    return 0.5 * (t[1:] + t[:-1]), fwd, side, om, travel, jump
+
+
+def _body_twist(topic, t, vx, vy, wz, px, py, yaw, track, notes, warnings):
+    """The body's forward speed [m/s] and yaw rate [rad/s] rows (times,
+    forward, yaw rate) from a twist (N,) stamped t (N,) [s]: as given when
+    it is a body-frame twist (REP 105). An Odometry pose (px, py [m], yaw
+    [rad]; NaN for TwistStamped) mends drivers' habits that imported as a
+    robot standing still, or as speeds scaled by the cosine of the heading
+    (a probe's bags, each a confident wrong calibration):
+      - every twist zero while the pose's wheels travel POSE_ONLY_M or more:
+        the speeds are the pose's differences, each interval's mean at its
+        midpoint (forward: the step rotated into the body at the interval's
+        mean heading); a zero twist after a pose step (POSE_STEP_M) among
+        real ones: that row from the pose's step. Pose jumps (a driver
+        resetting) are left out;
+      - a lateral speed that the pose's heading rotates away (below
+        ODOM_FRAME_SHARE of itself): a twist in the odom frame, rotated
+        into the body.
+    A lateral speed above LATERAL_SHARE of the forward one that stays is a
+    warning (a skid or holonomic base, or a twist in a frame the pose cannot
+    tell), and so is one above LATERAL_UNCHECKED_SHARE with a pose that
+    never moves: only linear.x is used."""
+    fin = np.isfinite(px) & np.isfinite(py) & np.isfinite(yaw)
+    has_pose = fin.sum() >= max(2, 0.5 * fin.size)
+    if not has_pose:
+        return _frame_checked(topic, t, vx, vy, wz, None, notes, warnings)
+    if not fin.all():
+        notes.append(f"{topic}: {int((~fin).sum())} messages with a pose that is not a finite number: their pose "
+                     "left out")
+    tp, fwd, side, om, travel, jump = _pose_speeds(t[fin], px[fin], py[fin], yaw[fin], track)
+    zero = (vx == 0) & (vy == 0) & (wz == 0)
+    moved = float(travel[~jump].sum())
+    if zero.all() and moved >= POSE_ONLY_M:
+        keep = ~jump
+        notes.append(f"{topic}: every twist is zero while the pose's wheels travel {moved:.1f} m: the speeds are "
+                     "the pose's differences (each interval's mean, at its midpoint)"
+                     + (f"; {int(jump.sum())} pose jump(s) (a driver resetting it?) left out" if jump.any() else ""))
+        if _rms(side[keep]) > LATERAL_SHARE * _rms(fwd[keep]):
+            warnings.append(f"{topic}: the pose steps sideways to its own heading ({_rms(side[keep]):.2g} m/s rms "
+                            f"beside a forward {_rms(fwd[keep]):.2g}): its yaw does not follow the motion, and the "
+                            "forward speeds taken from it are short")
+        return tp[keep], fwd[keep], om[keep]
+    # a zero twist at the end of an interval over which the pose moved: a placeholder
+    ends = np.flatnonzero(fin)[1:]
+    placeholder = zero[ends] & (travel > POSE_STEP_M)
+    real = np.ones(t.size, bool)
+    real[ends[placeholder]] = False
+    tt, v, w = _frame_checked(topic, t[real], vx[real], vy[real], wz[real], (px[real], py[real], yaw[real]),
+                              notes, warnings)
+    if not placeholder.any():
+        return tt, v, w
+    use = placeholder & ~jump
+    notes.append(f"{topic}: {int(placeholder.sum())} messages with a zero twist while the pose moved: "
+                 f"{int(use.sum())} of those rows from the pose's step (its mean, at the interval's midpoint)"
+                 + (f", {int((placeholder & jump).sum())} pose jump(s) left out" if (placeholder & jump).any() else ""))
+    tt, v, w = (np.concatenate([a, b[use]]) for a, b in ((tt, tp), (v, fwd), (w, om)))
+    order = np.argsort(tt, kind="stable")
+    return tt[order], v[order], w[order]
+
+
+def _frame_checked(topic, t, vx, vy, wz, pose, notes, warnings):
+    """_body_twist's frame check of twist rows: as given, or rotated into
+    the body by the pose's yaw (``pose`` (px, py, yaw) (N,), NaN where a
+    message had none, or None) when that takes its lateral speed away."""
+    lateral, forward = _rms(vy), _rms(vx)
+    if lateral <= 1e-6 * max(forward, 1.0):
+        return t, vx, wz
+    fin = np.ones(t.size, bool) if pose is None else np.isfinite(pose[0]) & np.isfinite(pose[1]) & np.isfinite(pose[2])
+    moves = pose is not None and fin.sum() >= 2 and np.ptp(pose[0][fin]) + np.ptp(pose[1][fin]) > 0.0
+    if moves:
+        # tried whenever there is a lateral speed: an odom-frame twist heading near the x axis
+        # has a small one, and taking its linear.x for the forward speed scales it by cos(yaw)
+        c, s = np.cos(pose[2][fin]), np.sin(pose[2][fin])
+        fwd, side = c * vx[fin] + s * vy[fin], -s * vx[fin] + c * vy[fin]
+        if _rms(side) <= ODOM_FRAME_SHARE * _rms(vy[fin]):
+            notes.append(f"{topic}: the twist is in the odom frame (its lateral speed, {lateral:.2g} m/s rms, is "
+                         "the heading's; REP 105 puts it in child_frame_id): rotated into the body by the pose's yaw"
+                         + (f"; {int((~fin).sum())} rows without a pose to rotate by left out" if not fin.all() else ""))
+            return t[fin], fwd, wz[fin]
+    if lateral > LATERAL_SHARE * forward:
+        warnings.append(f"{topic}: the twist has a lateral speed of {lateral:.2g} m/s rms beside a forward "
+                        f"{forward:.2g} m/s: not a differential drive's body-frame twist (a skid or holonomic base, "
+                        "or a twist in another frame); only its forward speed linear.x is used")
+    elif not moves and lateral > LATERAL_UNCHECKED_SHARE * forward:
+        warnings.append(f"{topic}: the twist has a lateral speed of {lateral:.2g} m/s rms ({lateral / forward:.0%} "
+                        "of the forward) and the pose does not move, so the twist's frame cannot be checked: in the "
+                        "odom frame its linear.x is the forward speed times cos(heading); only linear.x is used")
+    return t, vx, wz
 
 
 #: A driver restart (_restarts): both wheel positions land within this of 0 [rad]...
