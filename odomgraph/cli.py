@@ -885,9 +885,11 @@ def import_(
              "(their twist is split into wheel speeds through --track-width, which assumes the odometry came "
              "from the wheels alone). Default: the one such topic.")] = None,
     left_joint: Annotated[Optional[str], typer.Option(
-        help="rosbag: left wheel joint name (default: the joint named left ... wheel).")] = None,
+        help="rosbag: left wheel joint name (default: the joints named left ... wheel; a skid-steer's front "
+             "and rear ones averaged). Given, that one joint alone.")] = None,
     right_joint: Annotated[Optional[str], typer.Option(
-        help="rosbag: right wheel joint name (default: the joint named right ... wheel).")] = None,
+        help="rosbag: right wheel joint name (default: the joints named right ... wheel, averaged). Given, that "
+             "one joint alone.")] = None,
     wheel_radius: Annotated[Optional[float], typer.Option(
         help="rosbag: nominal wheel radius [m] (JointState wheels only).")] = None,
     track_width: Annotated[Optional[float], typer.Option(help="rosbag: nominal track width [m].")] = None,

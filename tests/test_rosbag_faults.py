@@ -165,9 +165,26 @@ def test_a_skid_steer_s_four_wheel_joints_are_averaged_per_side(sim, clean, tmp_
     np.testing.assert_allclose(log.wheel_speeds.v_right, clean.wheel_speeds.v_right, atol=tol)
     assert np.sqrt(np.mean((log.wheel_speeds.v_left - clean.wheel_speeds.v_left) ** 2)) < tol / 3
     assert (sum("wraps at a full turn" in m for m in log.notes) == 4) == wrap
+    # the rear wheels missing from a tenth of the messages: the four still taken, those messages skipped
+    gaps = _imp(_bag(tmp_path / "gaps", sim, sides=four, wrap=wrap,
+                     order=lambda k: ["front_left_wheel", "front_right_wheel"] if k % 10 == 3 else names))
+    assert any("2 wheel joints a side" in m for m in gaps.notes)
+    n_gap = len(range(3, len(sim.encoders.t), 10))
+    assert any(f"{n_gap} messages without the wheel joints" in m for m in gaps.notes), gaps.notes
     three = {**four, "middle_left_wheel": ("left_wheel_joint", 0.0)}
     with pytest.raises(LogFormatError, match="cannot tell which joints are the left and right wheels"):
         _imp(_bag(tmp_path / "three", sim, sides=three, order=lambda k: list(three)))
+    if wrap:
+        return
+    # a motor behind a 20:1 gearbox named like its wheel is no second wheel: refused, not averaged in
+    e, r = sim.encoders, sim.robot
+    motor = {n: ("left_wheel_joint" if "left" in n else "right_wheel_joint",
+                 19.0 * np.cumsum(e.ticks_left if "left" in n else e.ticks_right)
+                 / (r.ticks_per_meter_left if "left" in n else r.ticks_per_meter_right) / R_WHEEL)
+             for n in ("left_wheel_motor", "right_wheel_motor")}
+    with pytest.raises(LogFormatError, match=r"turn unlike one another over the run \(left_wheel_joint 0.05, "
+                                             r"left_wheel_motor 1 of the most\)"):
+        _imp(_bag(tmp_path / "motor", sim, sides=motor, order=lambda k: [*JOINTS, *motor]))
 
 
 def test_wheels_that_never_move_are_said(sim, tmp_path):

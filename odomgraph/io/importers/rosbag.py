@@ -418,7 +418,26 @@ def _wheel_joints(bag: Path, topic: str, names: list[str], left: str | None,
 MAX_WHEELS_PER_SIDE = 3
 
 
-def _side_means(rows: list, sides: tuple[tuple[str, ...], tuple[str, ...]], topic: str, notes: list) -> list:
+#: The joints taken as one side's wheels turn within this factor of each
+#: other over the run (_same_turning): a motor's angle behind a gearbox, named
+#: like its wheel, turns 10-50 times as far.
+SIDE_AGREE = 1.25
+
+
+def _same_turning(bag, topic: str, joints: tuple[str, ...], turned: np.ndarray) -> None:
+    """Refuse a side's joints whose total turning ``turned`` (k,) [rad] (or
+    summed |rate|) differ by more than SIDE_AGREE: they are not wheels on
+    one side of a skid-steer base, and their mean would be no wheel's."""
+    if len(joints) < 2 or not np.all(np.isfinite(turned)) or turned.max() == 0.0:
+        return
+    if turned.min() * SIDE_AGREE < turned.max():
+        ratio = ", ".join(f"{j} {x / turned.max():.2g}" for j, x in zip(joints, turned))
+        raise LogFormatError(bag, f"{topic}: the joints {list(joints)} look like one side's wheels but turn "
+                                  f"unlike one another over the run ({ratio} of the most): give --left-joint and "
+                                  "--right-joint")
+
+
+def _side_means(bag, rows: list, sides: tuple[tuple[str, ...], tuple[str, ...]], topic: str, notes: list) -> list:
     """Wheel rows (t, left position, right position, left velocity, right
     velocity) from rows holding each side's joints' values ((t, left
     positions (k,), right positions (k,), left velocities, right
@@ -439,12 +458,19 @@ def _side_means(rows: list, sides: tuple[tuple[str, ...], tuple[str, ...]], topi
             p = np.array(pos)
             p = np.stack([_unwrap_angle(p[:, j], topic, f"{side} ({sides[c][j]})", notes)
                           for j in range(p.shape[1])], axis=1)
+            _same_turning(bag, topic, sides[c], np.abs(np.diff(p, axis=0)).sum(axis=0))
             cols.append(p.mean(axis=1))
         else:
             cols.append(np.full(len(rows), np.nan))
     for c in (0, 1):
         vel = [r[3 + c] for r in rows]
-        cols.append(np.array([v.mean() for v in vel]) if all(v.size for v in vel) else np.full(len(rows), np.nan))
+        if all(v.size for v in vel):
+            v = np.array(vel)
+            if np.isnan(cols[c]).all():     # the velocities are the wheels (_wheel_speeds)
+                _same_turning(bag, topic, sides[c], np.abs(v).sum(axis=0))
+            cols.append(v.mean(axis=1))
+        else:
+            cols.append(np.full(len(rows), np.nan))
     notes.append(f"{topic}: {len(sides[0])} wheel joints a side ({', '.join(sides[0])} | {', '.join(sides[1])}): "
                  "each side is their mean, as a diff-drive controller takes it")
     for k, r in enumerate(rows):
@@ -512,7 +538,11 @@ def _joint_rows(bag, topic: str, msgs: list, left: str | None, right: str | None
             pairs[pair] = sum(c for n, c in counts.items() if all(j in n for j in pair[0] + pair[1]))
         if not pairs:
             raise error
-        sides = max(pairs, key=lambda pr: (all("wheel" in j.lower() for j in pr[0] + pr[1]), pairs[pr]))
+        # joints named "wheel" first; then every wheel a side over a pair that more messages hold (a
+        # probe: rear wheels missing from 10 % of the messages made the front pair win, without a word)
+        most = max(pairs.values())
+        sides = max(pairs, key=lambda pr: (all("wheel" in j.lower() for j in pr[0] + pr[1]),
+                                           pairs[pr] >= 0.5 * most, len(pr[0]), pairs[pr]))
     joints = sides[0] + sides[1]
     rows, other = [], 0
     frozen = _frozen_publishers(msgs, joints)
@@ -541,7 +571,7 @@ def _joint_rows(bag, topic: str, msgs: list, left: str | None, right: str | None
     if other:
         notes.append(f"{topic}: {other} messages without the wheel joints {list(joints)} skipped (another publisher "
                      "on the topic)")
-    return _side_means(rows, sides, topic, notes)
+    return _side_means(bag, rows, sides, topic, notes)
 
 
 def import_rosbag(bag: Path | str, wheel_topic: str | None = None, left_joint: str | None = None,
@@ -870,17 +900,32 @@ def _wheel_speeds(bag, topic, kind, rows, wheel_radius, track_width, notes, warn
 
 #: An Odometry pose whose wheels travel this far [m] (translation and
 #: track / 2 x turning) while every twist is zero: a driver that fills only
-#: the pose (_body_twist).
+#: the pose (_body_twist). The same travel (or POSE_TURN_RAD of turning)
+#: while one part of every twist (linear or angular) is zero: a driver that
+#: never fills that part.
 POSE_ONLY_M = 0.5
-#: A zero twist after a pose step of this much wheel travel [m]: a
-#: placeholder, not a robot at rest (_body_twist). A wheel odometry's pose
-#: does not move at rest; 2 mm missed a robot creeping at 3 cm/s at 20 Hz.
-POSE_STEP_M = 1e-4
-#: A pose step this many times the 99th percentile of the pose's speeds (plus
-#: POSE_JUMP_V / POSE_JUMP_W) is a jump, a driver resetting its pose, and left out.
+POSE_TURN_RAD = 1.0
+#: A run of zero twists among moving ones is a placeholder when the pose's
+#: wheels travel across it, and its rows' median pace, are between this
+#: share of what the twists either side say and its inverse (a robot that
+#: really stopped hardly moves, and a fused pose's jitter moves far faster
+#: than creeping twists say: a probe's 2 cm corrections at stops were read
+#: as 1 m/s rows), and the travel at least POSE_STEP_M [m].
+PLACEHOLDER_SHARE = 0.5
+POSE_STEP_M = 2e-3
+#: A pose step this many times the 99th percentile of the pose's moving
+#: speeds (plus POSE_JUMP_V [m/s] / POSE_JUMP_W [rad/s]) is a jump, a driver
+#: resetting its pose, and left out.
 POSE_JUMP_TIMES = 3.0
 POSE_JUMP_V = 0.5
 POSE_JUMP_W = 1.0
+#: Between two pose updates further apart than this many median update
+#: periods the robot stood: its wheels' rows are 0 until the last period,
+#: which holds the step (a pose-only driver at a stop).
+POSE_STOP_PERIODS = 5.0
+#: The baseline [s] over which a pose's steps are compared with its yaw
+#: (a yaw that does not follow the motion; a pose's jitter averages out).
+POSE_SIDE_BASELINE_S = 1.0
 #: A twist whose lateral speed's rms is more than this share of its forward
 #: one: not a differential drive's body-frame twist (REP 105: the twist is in
 #: child_frame_id) (_body_twist).
@@ -904,26 +949,100 @@ def _rms(x: np.ndarray) -> float:
     return float(np.sqrt(np.mean(np.square(x)))) if x.size else 0.0
 
 
-def _pose_speeds(t, px, py, yaw, track):
-    """Per interval between consecutive poses (K - 1,): the midpoint [s],
-    the body's forward and lateral speed [m/s] (the step rotated into the
-    body at the interval's mean heading) and yaw rate [rad/s], the wheels'
-    travel [m] (translation + track / 2 |turn|), and a jump mask
-    (POSE_JUMP_TIMES: a driver resetting its pose)."""
-    dt = np.diff(t)
-    dyaw = np.angle(np.exp(1j * np.diff(yaw)))
-    mid = yaw[:-1] + 0.5 * dyaw
-    dx, dy = np.diff(px), np.diff(py)
-    fwd = (np.cos(mid) * dx + np.sin(mid) * dy) / dt
-    side = (-np.sin(mid) * dx + np.cos(mid) * dy) / dt
-    om = dyaw / dt
-    travel = np.hypot(dx, dy) + 0.5 * track * np.abs(dyaw)
-    jump = np.zeros(dt.size, bool)
-    if dt.size:
-        v99, w99 = np.percentile(np.hypot(fwd, side), 99), np.percentile(np.abs(om), 99)
-        jump = ((np.hypot(fwd, side) > POSE_JUMP_TIMES * v99 + POSE_JUMP_V)
-                | (np.abs(om) > POSE_JUMP_TIMES * w99 + POSE_JUMP_W))
-    return 0.5 * (t[1:] + t[:-1]), fwd, side, om, travel, jump
+class _PoseTrack:
+    """An Odometry's pose as a function of time, from its updates: a driver
+    may republish a pose faster than it updates it (a probe: 50 Hz messages,
+    a new pose every 5th, read as speeds 0, 0, 0, 0, 5v), so only the
+    messages whose pose differs from the one before count. Per interval
+    between updates (K - 1,): ``mid`` [s], body ``fwd``/``side`` speeds
+    [m/s] (the step rotated into the body at the interval's mean heading),
+    yaw rate ``om`` [rad/s], the wheels' ``travel`` [m] (translation +
+    track / 2 |turn|) and ``jump`` (POSE_JUMP_TIMES: a driver resetting its
+    pose)."""
+
+    def __init__(self, t, x, y, yaw, track):
+        same = (np.diff(x) == 0) & (np.diff(y) == 0) & (np.diff(yaw) == 0)
+        u = np.concatenate([[0], np.flatnonzero(~same) + 1])
+        self.t, self.x, self.y = t[u], x[u], y[u]
+        self.yaw = np.unwrap(yaw[u])
+        self.track = track
+        dt = np.diff(self.t)
+        dyaw = np.diff(self.yaw)
+        mid_yaw = self.yaw[:-1] + 0.5 * dyaw
+        dx, dy = np.diff(self.x), np.diff(self.y)
+        self.dt, self.mid = dt, 0.5 * (self.t[1:] + self.t[:-1])
+        self.fwd = (np.cos(mid_yaw) * dx + np.sin(mid_yaw) * dy) / dt
+        self.side = (-np.sin(mid_yaw) * dx + np.cos(mid_yaw) * dy) / dt
+        self.om = dyaw / dt
+        self.travel = np.hypot(dx, dy) + 0.5 * track * np.abs(dyaw)
+        self.jump = np.zeros(dt.size, bool)
+        moving = self.travel > POSE_STEP_M
+        if moving.any():
+            # percentiles over moving intervals: a mostly idle bag's would be 0 (a probe: 93 of 110
+            # driving rows of an 11 s drive after 25 min at rest taken for jumps)
+            v99 = np.percentile(np.hypot(self.fwd, self.side)[moving], 99)
+            w99 = np.percentile(np.abs(self.om)[moving], 99)
+            self.jump = ((np.hypot(self.fwd, self.side) > POSE_JUMP_TIMES * v99 + POSE_JUMP_V)
+                         | (np.abs(self.om) > POSE_JUMP_TIMES * w99 + POSE_JUMP_W))
+        self.period = float(np.median(dt)) if dt.size else 0.0
+        # repeats between updates while moving (not at a stop, where a pose stays by itself)
+        self.held = int((np.diff(u) - 1)[dt <= POSE_STOP_PERIODS * self.period].sum())
+
+    def interval(self, t: np.ndarray) -> np.ndarray:
+        """(M,) index of the interval between updates that ends at or after
+        each time t (the update that brings the motion at t); -1 outside."""
+        i = np.searchsorted(self.t, t, side="left") - 1
+        return np.where((i >= 0) & (i < self.dt.size) & (t > self.t[0]), i, -1)
+
+    def travel_between(self, t0: np.ndarray, t1: np.ndarray) -> np.ndarray:
+        """The wheels' travel [m] from the pose at t0 to the pose at t1
+        (each linear between updates)."""
+        d = [np.interp(t1, self.t, c) - np.interp(t0, self.t, c) for c in (self.x, self.y, self.yaw)]
+        return np.hypot(d[0], d[1]) + 0.5 * self.track * np.abs(d[2])
+
+    def turned(self) -> float:
+        return float(np.abs(np.diff(self.yaw))[~self.jump].sum())
+
+    def translated(self) -> float:
+        return float(np.hypot(np.diff(self.x), np.diff(self.y))[~self.jump].sum())
+
+    def rows(self, t_msgs: np.ndarray):
+        """Pose-only rows (times, forward, yaw rate): each interval's mean at
+        its midpoint; an interval longer than POSE_STOP_PERIODS periods is a
+        stop: 0 at the messages (t_msgs) inside it, the step in its last
+        period."""
+        keep = ~self.jump
+        stop = keep & (self.dt > POSE_STOP_PERIODS * self.period)
+        go = keep & ~stop
+        ts, vs, ws = [self.mid[go]], [self.fwd[go]], [self.om[go]]
+        for i in np.flatnonzero(stop):
+            p = self.period
+            still = t_msgs[(t_msgs > self.t[i]) & (t_msgs < self.t[i + 1] - p)]
+            ts += [still, [self.t[i + 1] - 0.5 * p]]
+            vs += [np.zeros(still.size), [self.fwd[i] * self.dt[i] / p]]
+            ws += [np.zeros(still.size), [self.om[i] * self.dt[i] / p]]
+        t, v, w = (np.concatenate([np.asarray(a, float) for a in c]) for c in (ts, vs, ws))
+        order = np.argsort(t, kind="stable")
+        return t[order], v[order], w[order]
+
+    def sideways(self) -> tuple[float, float]:
+        """The rms lateral and forward speeds [m/s] of the pose's steps over
+        POSE_SIDE_BASELINE_S, against its own yaw (jitter averages out)."""
+        k = max(1, int(round(POSE_SIDE_BASELINE_S / self.period))) if self.period > 0 else 1
+        idx = np.arange(0, self.t.size, k)
+        dx, dy, dyaw = np.diff(self.x[idx]), np.diff(self.y[idx]), np.diff(self.yaw[idx])
+        h = self.yaw[idx][:-1] + 0.5 * dyaw
+        dt = np.diff(self.t[idx])
+        ok = dt < 2 * k * POSE_STOP_PERIODS * self.period if self.period > 0 else np.ones(dt.size, bool)
+        fwd = (np.cos(h) * dx + np.sin(h) * dy)[ok] / dt[ok]
+        side = (-np.sin(h) * dx + np.cos(h) * dy)[ok] / dt[ok]
+        return _rms(side), _rms(fwd)
+
+
+def _zero_runs(zero: np.ndarray) -> list[tuple[int, int]]:
+    """(first, last) index of each run of True in ``zero``."""
+    d = np.diff(np.concatenate([[0], zero.astype(int), [0]]))
+    return list(zip(np.flatnonzero(d == 1), np.flatnonzero(d == -1) - 1))
 
 
 def _body_twist(topic, t, vx, vy, wz, px, py, yaw, track, notes, warnings):
@@ -932,56 +1051,88 @@ def _body_twist(topic, t, vx, vy, wz, px, py, yaw, track, notes, warnings):
     it is a body-frame twist (REP 105). An Odometry pose (px, py [m], yaw
     [rad]; NaN for TwistStamped) mends drivers' habits that imported as a
     robot standing still, or as speeds scaled by the cosine of the heading
-    (a probe's bags, each a confident wrong calibration):
+    (a probe's bags, each a confident wrong calibration), going by the
+    pose's updates (_PoseTrack):
       - every twist zero while the pose's wheels travel POSE_ONLY_M or more:
-        the speeds are the pose's differences, each interval's mean at its
-        midpoint (forward: the step rotated into the body at the interval's
-        mean heading); a zero twist after a pose step (POSE_STEP_M) among
-        real ones: that row from the pose's step. Pose jumps (a driver
-        resetting) are left out;
-      - a lateral speed that the pose's heading rotates away (below
-        ODOM_FRAME_SHARE of itself): a twist in the odom frame, rotated
-        into the body.
-    A lateral speed above LATERAL_SHARE of the forward one that stays is a
-    warning (a skid or holonomic base, or a twist in a frame the pose cannot
-    tell), and so is one above LATERAL_UNCHECKED_SHARE with a pose that
-    never moves: only linear.x is used."""
+        the speeds are the pose's (_PoseTrack.rows);
+      - a part of every twist zero (linear.x never filled, or angular.z)
+        while the pose moves or turns: that part from the pose, at each
+        message's stamp (the interval that brings its motion);
+      - a run of zero twists among real ones across which the pose's wheels
+        travel (PLACEHOLDER_SHARE): those rows from the pose;
+      - pose jumps (a driver resetting) left out;
+      - a lateral speed that the pose's heading rotates away: a twist in
+        the odom frame, rotated into the body (_frame_checked)."""
     fin = np.isfinite(px) & np.isfinite(py) & np.isfinite(yaw)
-    has_pose = fin.sum() >= max(2, 0.5 * fin.size)
-    if not has_pose:
+    if fin.sum() < max(2, 0.5 * fin.size):
         return _frame_checked(topic, t, vx, vy, wz, None, notes, warnings)
     if not fin.all():
         notes.append(f"{topic}: {int((~fin).sum())} messages with a pose that is not a finite number: their pose "
                      "left out")
-    tp, fwd, side, om, travel, jump = _pose_speeds(t[fin], px[fin], py[fin], yaw[fin], track)
+    pose = _PoseTrack(t[fin], px[fin], py[fin], yaw[fin], track)
+    if pose.dt.size == 0:
+        return _frame_checked(topic, t, vx, vy, wz, (px, py, yaw), notes, warnings)
     zero = (vx == 0) & (vy == 0) & (wz == 0)
-    moved = float(travel[~jump].sum())
+    moved = float(pose.travel[~pose.jump].sum())
+    jumps = (f"; {int(pose.jump.sum())} pose jump(s) (a driver resetting it?) left out" if pose.jump.any() else "")
+    held = (f"; {pose.held} messages repeat the pose before them (republished between updates): "
+            "the speeds go by its updates" if pose.held > 0.1 * t.size else "")
     if zero.all() and moved >= POSE_ONLY_M:
-        keep = ~jump
         notes.append(f"{topic}: every twist is zero while the pose's wheels travel {moved:.1f} m: the speeds are "
-                     "the pose's differences (each interval's mean, at its midpoint)"
-                     + (f"; {int(jump.sum())} pose jump(s) (a driver resetting it?) left out" if jump.any() else ""))
-        if _rms(side[keep]) > LATERAL_SHARE * _rms(fwd[keep]):
-            warnings.append(f"{topic}: the pose steps sideways to its own heading ({_rms(side[keep]):.2g} m/s rms "
-                            f"beside a forward {_rms(fwd[keep]):.2g}): its yaw does not follow the motion, and the "
-                            "forward speeds taken from it are short")
-        return tp[keep], fwd[keep], om[keep]
-    # a zero twist at the end of an interval over which the pose moved: a placeholder
-    ends = np.flatnonzero(fin)[1:]
-    placeholder = zero[ends] & (travel > POSE_STEP_M)
-    real = np.ones(t.size, bool)
-    real[ends[placeholder]] = False
-    tt, v, w = _frame_checked(topic, t[real], vx[real], vy[real], wz[real], (px[real], py[real], yaw[real]),
-                              notes, warnings)
-    if not placeholder.any():
-        return tt, v, w
-    use = placeholder & ~jump
-    notes.append(f"{topic}: {int(placeholder.sum())} messages with a zero twist while the pose moved: "
-                 f"{int(use.sum())} of those rows from the pose's step (its mean, at the interval's midpoint)"
-                 + (f", {int((placeholder & jump).sum())} pose jump(s) left out" if (placeholder & jump).any() else ""))
-    tt, v, w = (np.concatenate([a, b[use]]) for a, b in ((tt, tp), (v, fwd), (w, om)))
-    order = np.argsort(tt, kind="stable")
-    return tt[order], v[order], w[order]
+                     "the pose's differences (each interval's mean, at its midpoint)" + jumps + held)
+        side, fwd = pose.sideways()
+        if side > LATERAL_SHARE * fwd:
+            warnings.append(f"{topic}: the pose steps sideways to its own heading ({side:.2g} m/s rms beside a "
+                            f"forward {fwd:.2g}, over {POSE_SIDE_BASELINE_S:g} s): its yaw does not follow the "
+                            "motion, and the forward speeds taken from it are short")
+        return pose.rows(t)
+    k = pose.interval(t)
+    ok = k >= 0
+    kk = np.where(ok, k, 0)
+    ok &= ~pose.jump[kk]
+    vx, vy, wz = vx.copy(), vy.copy(), wz.copy()
+    drop = np.zeros(t.size, bool)
+    if not np.any(wz) and (np.any(vx) or np.any(vy)) and pose.turned() >= POSE_TURN_RAD:
+        notes.append(f"{topic}: angular.z is zero in every message while the pose turns {pose.turned():.1f} rad: "
+                     "the yaw rate is the pose's (the interval that brings each message's motion)" + jumps + held)
+        wz[ok] = pose.om[kk[ok]]
+        drop |= ~ok
+    elif not (np.any(vx) or np.any(vy)) and np.any(wz) and pose.translated() >= POSE_ONLY_M:
+        notes.append(f"{topic}: linear.x is zero in every message while the pose moves {pose.translated():.1f} m: "
+                     "the forward speed is the pose's (the interval that brings each message's motion)"
+                     + jumps + held)
+        vx[ok], vy[ok] = pose.fwd[kk[ok]], 0.0
+        drop |= ~ok
+    else:
+        placeholder = np.zeros(t.size, bool)
+        for k0, k1 in _zero_runs(zero):
+            s0, s1 = max(k0 - 1, 0), min(k1 + 1, t.size - 1)
+            nb = [j for j in (k0 - 1, k1 + 1) if 0 <= j < t.size and not zero[j]]
+            if not nb:
+                continue
+            speed = float(np.mean([abs(vx[j]) + abs(vy[j]) + 0.5 * track * abs(wz[j]) for j in nb]))
+            said = speed * (t[s1] - t[s0])
+            went = float(pose.travel_between(t[s0], t[s1]))
+            run = np.arange(k0, k1 + 1)[ok[k0:k1 + 1]]
+            pace = (float(np.median(np.abs(pose.fwd[kk[run]]) + 0.5 * track * np.abs(pose.om[kk[run]])))
+                    if run.size else 0.0)
+            # as far and as fast as the twists either side say, give or take: a robot that stopped
+            # hardly moves, and a fused pose's jitter (a probe's: 1 cm) beside creeping twists goes
+            # much faster than they say
+            if (max(POSE_STEP_M, PLACEHOLDER_SHARE * said) <= went <= said / PLACEHOLDER_SHARE + POSE_STEP_M
+                    and PLACEHOLDER_SHARE * speed <= pace <= speed / PLACEHOLDER_SHARE):
+                placeholder[k0:k1 + 1] = True
+        if placeholder.any():
+            use, out = placeholder & ok, placeholder & ~ok
+            notes.append(f"{topic}: {int(placeholder.sum())} messages with a zero twist while the pose moved "
+                         f"as the twists either side say: {int(use.sum())} of those rows from the pose (the interval "
+                         "that brings each one's motion)" + (f", {int(out.sum())} left out (a pose jump, or no "
+                                                            "pose update after them)" if out.any() else "") + held)
+            vx[use], vy[use], wz[use] = pose.fwd[kk[use]], 0.0, pose.om[kk[use]]
+            drop |= placeholder & ~ok
+    keep = ~drop
+    return _frame_checked(topic, t[keep], vx[keep], vy[keep], wz[keep], (px[keep], py[keep], yaw[keep]),
+                          notes, warnings)
 
 
 def _frame_checked(topic, t, vx, vy, wz, pose, notes, warnings):
@@ -1007,7 +1158,7 @@ def _frame_checked(topic, t, vx, vy, wz, pose, notes, warnings):
         warnings.append(f"{topic}: the twist has a lateral speed of {lateral:.2g} m/s rms beside a forward "
                         f"{forward:.2g} m/s: not a differential drive's body-frame twist (a skid or holonomic base, "
                         "or a twist in another frame); only its forward speed linear.x is used")
-    elif not moves and lateral > LATERAL_UNCHECKED_SHARE * forward:
+    elif pose is not None and not moves and lateral > LATERAL_UNCHECKED_SHARE * forward:
         warnings.append(f"{topic}: the twist has a lateral speed of {lateral:.2g} m/s rms ({lateral / forward:.0%} "
                         "of the forward) and the pose does not move, so the twist's frame cannot be checked: in the "
                         "odom frame its linear.x is the forward speed times cos(heading); only linear.x is used")
