@@ -171,6 +171,14 @@ def test_a_skid_steer_s_four_wheel_joints_are_averaged_per_side(sim, clean, tmp_
     assert any("2 wheel joints a side" in m for m in gaps.notes)
     n_gap = len(range(3, len(sim.encoders.t), 10))
     assert any(f"{n_gap} messages without the wheel joints" in m for m in gaps.notes), gaps.notes
+    # a caster named like a wheel is no driven wheel (a second read: it was averaged in); steering joints
+    # make a car-like base, refused
+    caster = {**four, "left_caster_wheel_joint": ("left_wheel_joint", 0.0)}
+    log_c = _imp(_bag(tmp_path / "caster", sim, sides=caster, wrap=wrap, order=lambda k: list(caster)))
+    np.testing.assert_allclose(log_c.wheel_speeds.v_left, log.wheel_speeds.v_left, atol=1e-12)
+    steer = {**four, "front_left_steering_joint": ("left_wheel_joint", 0.0)}
+    with pytest.raises(LogFormatError, match="steering joints beside wheels .* a car-like base"):
+        _imp(_bag(tmp_path / "steer", sim, sides=steer, order=lambda k: list(steer)))
     three = {**four, "middle_left_wheel": ("left_wheel_joint", 0.0)}
     with pytest.raises(LogFormatError, match="cannot tell which joints are the left and right wheels"):
         _imp(_bag(tmp_path / "three", sim, sides=three, order=lambda k: list(three)))

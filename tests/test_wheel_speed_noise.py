@@ -286,3 +286,21 @@ def test_the_ekf_nis_check_stays_quiet_on_the_fault_suite():
             assert not any("mean NIS" in w for w in est.warnings), name
             worst = max([worst] + [v["mean"] / v["expected"] for v in nis_summary(est).values()])
     assert runs >= len(CASES) - 2 and worst < 1.3 < NIS_WARN, (runs, worst)
+
+
+def test_the_nis_line_and_the_factor_cap_say_what_they_know():
+    """The EKF's NIS line names the model when the rows' own scatter was
+    measured (it does not explain a NIS above 3x: the run's sigma covers
+    it), for the gyro its scale or bias; unmeasured, the usual three
+    causes. A wheel factor at the bisection's cap is said as "at least"."""
+    from odomgraph.analysis.metrics import nis_warning
+    from odomgraph.analysis.noise import ROW_FACTOR_CAP
+    from odomgraph.pipeline import _row_scale_line
+    assert nis_warning("gyro", 290.0, 100, 1) == nis_warning("gyro", 2.9e4, 10_000, 1) is None
+    line = nis_warning("gyro", 400.0, 100, 1, 0.9)
+    assert line.startswith("gyro: mean NIS 4.0 over 100 updates, expected 1") and "a gyro scale or bias" in line
+    assert "0.9x robot.toml's sigma" in line
+    assert "a sigma too small" in nis_warning("encoders", 800.0, 100, 2)
+    log = simulate(paper(20.0), 3)
+    assert "at least 1e+04x that sigma" in _row_scale_line("encoders", log, ROW_FACTOR_CAP)
+    assert "at least" not in _row_scale_line("encoders", log, 9.0e3)

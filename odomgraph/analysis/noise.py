@@ -375,7 +375,7 @@ def gyro_row_scale(log) -> float | None:
     d2 = d2[np.isfinite(d2)]
     if d2.size < MIN_COUNT:
         return None
-    return _mad(d2) / (np.sqrt(6.0) * log.robot.gyro_sigma)
+    return float(_mad(d2) / (np.sqrt(6.0) * log.robot.gyro_sigma))
 
 
 def _gap_free(dt: np.ndarray, span: int) -> np.ndarray:
@@ -409,12 +409,13 @@ def applied_row_scale(sensor: str, f: float | None) -> float:
 def with_row_sigmas(robot, factors: dict[str, float]):
     """``robot`` with its [encoders] sigma (a, b) and [gyro] sigma
     multiplied by ``factors["encoders"]`` and ``factors["gyro"]`` (missing:
-    1). The one place the row sensors' fields are named: the widened run
-    (widened_rows) and calibrate's write-back (pipeline._with_fitted_noise)."""
+    1; a factor of 1 or less changes nothing: a sigma is never narrowed).
+    Shared by the widened run (widened_rows) and calibrate's write-back
+    (pipeline._with_fitted_noise)."""
     fe, fg = factors.get("encoders", 1.0), factors.get("gyro", 1.0)
-    if fe != 1.0:
+    if fe > 1.0:
         robot = robot.with_(encoder_sigma=tuple(v * fe for v in robot.encoder_sigma))
-    if fg != 1.0:
+    if fg > 1.0:
         robot = robot.with_(gyro_sigma=robot.gyro_sigma * fg)
     return robot
 
@@ -424,7 +425,7 @@ def widened_rows(log, scales: dict[str, float | None]):
     their ``scales`` (row_scales, or the factors a run applied) where they
     are above ROW_WIDEN_ABOVE (applied_row_scale)."""
     factors = {k: applied_row_scale(k, f) for k, f in scales.items() if k in ROW_WIDEN_ABOVE}
-    if all(f == 1.0 for f in factors.values()):
+    if not any(f > 1.0 for f in factors.values()):
         return log
     return log.with_(robot=with_row_sigmas(log.robot, factors))
 

@@ -401,13 +401,18 @@ def _wheel_joints(bag: Path, topic: str, names: list[str], left: str | None,
             raise LogFormatError(bag, f"{topic}: joints {left!r}/{right!r} not in {names} "
                                       "(--left-joint/--right-joint)")
         return (left,), (right,)
-    wheels = [n for n in names if "wheel" in n.lower()] or names
+    driven = [n for n in names if not any(w in n.lower() for w in NOT_DRIVEN)]
+    wheels = [n for n in driven if "wheel" in n.lower()] or driven
     ls = [n for n in wheels if "left" in n.lower() and "right" not in n.lower()]
     rs = [n for n in wheels if "right" in n.lower() and "left" not in n.lower()]
     if left:
         ls = [left] if left in names else []
     if right:
         rs = [right] if right in names else []
+    if len(ls) > 1 and any("steer" in n.lower() for n in names):
+        # front wheels that steer roll on longer arcs than the rear ones: no differential drive's mean
+        raise LogFormatError(bag, f"{topic}: steering joints beside wheels {ls + rs}: a car-like base is not a "
+                                  "differential drive; give --left-joint and --right-joint (its rear wheels)")
     if ls and len(ls) == len(rs) <= MAX_WHEELS_PER_SIDE:
         return tuple(ls), tuple(rs)
     raise LogFormatError(bag, f"{topic}: cannot tell which joints are the left and right wheels among {names}; "
@@ -416,6 +421,10 @@ def _wheel_joints(bag: Path, topic: str, names: list[str], left: str | None,
 
 #: Most wheel joints taken on one side (a six-wheeled rover's three).
 MAX_WHEELS_PER_SIDE = 3
+#: Words of joint names that are no driven wheel (a caster rolls where the
+#: robot goes, a steering joint turns the wheel; a second read: a
+#: left_caster_wheel_joint was averaged into the left side).
+NOT_DRIVEN = ("caster", "castor", "swivel", "steer", "idler")
 
 
 #: The joints taken as one side's wheels turn within this factor of each
@@ -570,7 +579,7 @@ def _joint_rows(bag, topic: str, msgs: list, left: str | None, right: str | None
                      *(vel[ix] if vel.size else empty for ix in (il, ir))))
     if other:
         notes.append(f"{topic}: {other} messages without the wheel joints {list(joints)} skipped (another publisher "
-                     "on the topic)")
+                     "on the topic, or messages that leave some of the joints out)")
     return _side_means(bag, rows, sides, topic, notes)
 
 
@@ -874,6 +883,10 @@ def _wheel_speeds(bag, topic, kind, rows, wheel_radius, track_width, notes, warn
     if kind != "joints":
         _, vy, px, py, yaw = _increasing(j[:, 0], *(j[:, c] for c in range(5, 9)))
         t, v, om = _body_twist(topic, t, a, vy, b, px, py, yaw, track_width, notes, warnings)
+        if t.size < 2:
+            # (a pose-only driver whose pose updated once gives one row, which no estimator can use)
+            raise LogFormatError(bag, f"{topic}: fewer than two wheel rows from its twist and pose "
+                                      f"({len(j)} messages)")
         return WheelSpeeds(t, v - 0.5 * track_width * om, v + 0.5 * track_width * om)
     positions = bool(np.all(np.isfinite(a)) and np.all(np.isfinite(b)))
     velocities = bool(np.all(np.isfinite(vl)) and np.all(np.isfinite(vr)))
@@ -913,12 +926,17 @@ POSE_TURN_RAD = 1.0
 #: as 1 m/s rows), and the travel at least POSE_STEP_M [m].
 PLACEHOLDER_SHARE = 0.5
 POSE_STEP_M = 2e-3
-#: A pose step this many times the 99th percentile of the pose's moving
-#: speeds (plus POSE_JUMP_V [m/s] / POSE_JUMP_W [rad/s]) is a jump, a driver
-#: resetting its pose, and left out.
-POSE_JUMP_TIMES = 3.0
+#: A pose step faster than this many times the 90th percentile of the
+#: pose's moving speeds (above POSE_MOVING_V [m/s]), plus POSE_JUMP_V [m/s],
+#: or turning faster than POSE_JUMP_W [rad/s] plus as many times its 90th
+#: percentile, is a jump, a driver resetting its pose, and left out. The
+#: 90th percentile leaves a reset out of its own reference in a short bag
+#: (a second read: a 60-message bag's reset read as a -19.5 m/s row); a
+#: stop's step is judged at the speed its row will carry (_PoseTrack.rows).
+POSE_JUMP_TIMES = 5.0
 POSE_JUMP_V = 0.5
-POSE_JUMP_W = 1.0
+POSE_JUMP_W = 10.0
+POSE_MOVING_V = 0.01
 #: Between two pose updates further apart than this many median update
 #: periods the robot stood: its wheels' rows are 0 until the last period,
 #: which holds the step (a pose-only driver at a stop).
@@ -975,18 +993,50 @@ class _PoseTrack:
         self.side = (-np.sin(mid_yaw) * dx + np.cos(mid_yaw) * dy) / dt
         self.om = dyaw / dt
         self.travel = np.hypot(dx, dy) + 0.5 * track * np.abs(dyaw)
+        self.period = float(np.median(dt)) if dt.size else 0.0
+        self.stop = dt > POSE_STOP_PERIODS * self.period
+        # the speed each interval's row carries: a stop's step in its last period (rows)
+        carried = np.where(self.stop, self.period, dt)
+        speed, turn = np.hypot(dx, dy) / carried, np.abs(dyaw) / carried
+        moving = speed > POSE_MOVING_V
         self.jump = np.zeros(dt.size, bool)
-        moving = self.travel > POSE_STEP_M
         if moving.any():
             # percentiles over moving intervals: a mostly idle bag's would be 0 (a probe: 93 of 110
             # driving rows of an 11 s drive after 25 min at rest taken for jumps)
-            v99 = np.percentile(np.hypot(self.fwd, self.side)[moving], 99)
-            w99 = np.percentile(np.abs(self.om)[moving], 99)
-            self.jump = ((np.hypot(self.fwd, self.side) > POSE_JUMP_TIMES * v99 + POSE_JUMP_V)
-                         | (np.abs(self.om) > POSE_JUMP_TIMES * w99 + POSE_JUMP_W))
-        self.period = float(np.median(dt)) if dt.size else 0.0
+            v90, w90 = np.percentile(speed[moving], 90), np.percentile(turn[moving], 90)
+            self.jump = ((speed > POSE_JUMP_TIMES * v90 + POSE_JUMP_V)
+                         | (turn > POSE_JUMP_TIMES * w90 + POSE_JUMP_W))
         # repeats between updates while moving (not at a stop, where a pose stays by itself)
-        self.held = int((np.diff(u) - 1)[dt <= POSE_STOP_PERIODS * self.period].sum())
+        self.held = int((np.diff(u) - 1)[~self.stop].sum())
+        self.noise = self._noise()
+
+    def _noise(self) -> float:
+        """The pose's own noise [m of wheel travel]: the robust scale of its
+        second differences over updates (sqrt(6) sigma for white noise; a
+        wheel odometry's smooth pose, the motion's own changes, about 0)."""
+        if self.t.size < 4:
+            return 0.0
+        d2 = [np.diff(c, 2) for c in (self.x, self.y, 0.5 * self.track * self.yaw)]
+        return float(1.4826 * np.median(np.sqrt(d2[0] ** 2 + d2[1] ** 2 + d2[2] ** 2)) / np.sqrt(6.0))
+
+    def _baseline(self) -> np.ndarray:
+        """Every POSE_SIDE_BASELINE_S's update index (at least every one)."""
+        k = max(1, int(round(POSE_SIDE_BASELINE_S / self.period))) if self.period > 0 else 1
+        idx = np.arange(0, self.t.size, k)
+        return idx if idx[-1] == self.t.size - 1 else np.append(idx, self.t.size - 1)
+
+    def moved(self) -> tuple[float, float]:
+        """How far the pose's wheels travel [m] and how far it turns [rad],
+        over POSE_SIDE_BASELINE_S steps, each less three times its noise
+        (a parked robot's jittery pose, summed update by update, travelled
+        57.7 m in a second read's minute), jumps left out."""
+        idx = self._baseline()
+        bad = np.add.reduceat(self.jump.astype(int), idx[:-1]) > 0 if self.jump.size else np.zeros(0, bool)
+        dp = np.hypot(np.diff(self.x[idx]), np.diff(self.y[idx]))
+        dth = np.abs(np.diff(self.yaw[idx]))
+        floor = 3.0 * np.sqrt(2.0) * self.noise
+        dp, dth = np.maximum(dp - floor, 0.0)[~bad], np.maximum(dth - 2 * floor / self.track, 0.0)[~bad]
+        return float(dp.sum() + 0.5 * self.track * dth.sum()), float(dth.sum())
 
     def interval(self, t: np.ndarray) -> np.ndarray:
         """(M,) index of the interval between updates that ends at or after
@@ -1000,19 +1050,13 @@ class _PoseTrack:
         d = [np.interp(t1, self.t, c) - np.interp(t0, self.t, c) for c in (self.x, self.y, self.yaw)]
         return np.hypot(d[0], d[1]) + 0.5 * self.track * np.abs(d[2])
 
-    def turned(self) -> float:
-        return float(np.abs(np.diff(self.yaw))[~self.jump].sum())
-
-    def translated(self) -> float:
-        return float(np.hypot(np.diff(self.x), np.diff(self.y))[~self.jump].sum())
-
     def rows(self, t_msgs: np.ndarray):
         """Pose-only rows (times, forward, yaw rate): each interval's mean at
         its midpoint; an interval longer than POSE_STOP_PERIODS periods is a
         stop: 0 at the messages (t_msgs) inside it, the step in its last
         period."""
         keep = ~self.jump
-        stop = keep & (self.dt > POSE_STOP_PERIODS * self.period)
+        stop = keep & self.stop
         go = keep & ~stop
         ts, vs, ws = [self.mid[go]], [self.fwd[go]], [self.om[go]]
         for i in np.flatnonzero(stop):
@@ -1028,8 +1072,8 @@ class _PoseTrack:
     def sideways(self) -> tuple[float, float]:
         """The rms lateral and forward speeds [m/s] of the pose's steps over
         POSE_SIDE_BASELINE_S, against its own yaw (jitter averages out)."""
-        k = max(1, int(round(POSE_SIDE_BASELINE_S / self.period))) if self.period > 0 else 1
-        idx = np.arange(0, self.t.size, k)
+        idx = self._baseline()
+        k = max(1, int(np.median(np.diff(idx)))) if idx.size > 1 else 1
         dx, dy, dyaw = np.diff(self.x[idx]), np.diff(self.y[idx]), np.diff(self.yaw[idx])
         h = self.yaw[idx][:-1] + 0.5 * dyaw
         dt = np.diff(self.t[idx])
@@ -1065,15 +1109,18 @@ def _body_twist(topic, t, vx, vy, wz, px, py, yaw, track, notes, warnings):
         the odom frame, rotated into the body (_frame_checked)."""
     fin = np.isfinite(px) & np.isfinite(py) & np.isfinite(yaw)
     if fin.sum() < max(2, 0.5 * fin.size):
+        if fin.any():
+            notes.append(f"{topic}: the pose is not a finite number in {int((~fin).sum())} of {fin.size} messages: "
+                         "not used (its twist taken as it is)")
         return _frame_checked(topic, t, vx, vy, wz, None, notes, warnings)
     if not fin.all():
         notes.append(f"{topic}: {int((~fin).sum())} messages with a pose that is not a finite number: their pose "
                      "left out")
     pose = _PoseTrack(t[fin], px[fin], py[fin], yaw[fin], track)
     if pose.dt.size == 0:
-        return _frame_checked(topic, t, vx, vy, wz, (px, py, yaw), notes, warnings)
+        return _frame_checked(topic, t, vx, vy, wz, (px, py, yaw), notes, warnings, moves=False)
     zero = (vx == 0) & (vy == 0) & (wz == 0)
-    moved = float(pose.travel[~pose.jump].sum())
+    moved, turned = pose.moved()
     jumps = (f"; {int(pose.jump.sum())} pose jump(s) (a driver resetting it?) left out" if pose.jump.any() else "")
     held = (f"; {pose.held} messages repeat the pose before them (republished between updates): "
             "the speeds go by its updates" if pose.held > 0.1 * t.size else "")
@@ -1092,17 +1139,19 @@ def _body_twist(topic, t, vx, vy, wz, px, py, yaw, track, notes, warnings):
     ok &= ~pose.jump[kk]
     vx, vy, wz = vx.copy(), vy.copy(), wz.copy()
     drop = np.zeros(t.size, bool)
-    if not np.any(wz) and (np.any(vx) or np.any(vy)) and pose.turned() >= POSE_TURN_RAD:
-        notes.append(f"{topic}: angular.z is zero in every message while the pose turns {pose.turned():.1f} rad: "
+    filled = np.zeros(t.size, bool)      # rows whose forward speed came from the pose: body frame already
+    if not np.any(wz) and (np.any(vx) or np.any(vy)) and turned >= POSE_TURN_RAD:
+        notes.append(f"{topic}: angular.z is zero in every message while the pose turns {turned:.1f} rad: "
                      "the yaw rate is the pose's (the interval that brings each message's motion)" + jumps + held)
         wz[ok] = pose.om[kk[ok]]
         drop |= ~ok
-    elif not (np.any(vx) or np.any(vy)) and np.any(wz) and pose.translated() >= POSE_ONLY_M:
-        notes.append(f"{topic}: linear.x is zero in every message while the pose moves {pose.translated():.1f} m: "
-                     "the forward speed is the pose's (the interval that brings each message's motion)"
-                     + jumps + held)
+    elif not (np.any(vx) or np.any(vy)) and np.any(wz) and moved - 0.5 * track * turned >= POSE_ONLY_M:
+        notes.append(f"{topic}: linear.x is zero in every message while the pose moves "
+                     f"{moved - 0.5 * track * turned:.1f} m: the forward speed is the pose's (the interval that brings "
+                     "each message's motion)" + jumps + held)
         vx[ok], vy[ok] = pose.fwd[kk[ok]], 0.0
         drop |= ~ok
+        filled = ok.copy()
     else:
         placeholder = np.zeros(t.size, bool)
         for k0, k1 in _zero_runs(zero):
@@ -1130,30 +1179,39 @@ def _body_twist(topic, t, vx, vy, wz, px, py, yaw, track, notes, warnings):
                                                             "pose update after them)" if out.any() else "") + held)
             vx[use], vy[use], wz[use] = pose.fwd[kk[use]], 0.0, pose.om[kk[use]]
             drop |= placeholder & ~ok
+            filled = use
     keep = ~drop
     return _frame_checked(topic, t[keep], vx[keep], vy[keep], wz[keep], (px[keep], py[keep], yaw[keep]),
-                          notes, warnings)
+                          notes, warnings, moves=moved >= POSE_ONLY_M, fixed=filled[keep])
 
 
-def _frame_checked(topic, t, vx, vy, wz, pose, notes, warnings):
+def _frame_checked(topic, t, vx, vy, wz, pose, notes, warnings, moves: bool = False, fixed=None):
     """_body_twist's frame check of twist rows: as given, or rotated into
     the body by the pose's yaw (``pose`` (px, py, yaw) (N,), NaN where a
-    message had none, or None) when that takes its lateral speed away."""
-    lateral, forward = _rms(vy), _rms(vx)
+    message had none, or None for a TwistStamped) when that takes its
+    lateral speed away. ``moves``: the pose travels far enough to tell the
+    frame; ``fixed`` (N,): rows already in the body (from the pose), left
+    out of the test and never rotated."""
+    fixed = np.zeros(t.size, bool) if fixed is None else fixed
+    lateral, forward = _rms(vy[~fixed]), _rms(vx[~fixed])
     if lateral <= 1e-6 * max(forward, 1.0):
         return t, vx, wz
-    fin = np.ones(t.size, bool) if pose is None else np.isfinite(pose[0]) & np.isfinite(pose[1]) & np.isfinite(pose[2])
-    moves = pose is not None and fin.sum() >= 2 and np.ptp(pose[0][fin]) + np.ptp(pose[1][fin]) > 0.0
-    if moves:
+    if pose is not None and moves:
+        fin = np.isfinite(pose[0]) & np.isfinite(pose[1]) & np.isfinite(pose[2])
+        test = fin & ~fixed
         # tried whenever there is a lateral speed: an odom-frame twist heading near the x axis
         # has a small one, and taking its linear.x for the forward speed scales it by cos(yaw)
-        c, s = np.cos(pose[2][fin]), np.sin(pose[2][fin])
-        fwd, side = c * vx[fin] + s * vy[fin], -s * vx[fin] + c * vy[fin]
-        if _rms(side) <= ODOM_FRAME_SHARE * _rms(vy[fin]):
+        c, s = np.cos(pose[2][test]), np.sin(pose[2][test])
+        fwd, side = c * vx[test] + s * vy[test], -s * vx[test] + c * vy[test]
+        if test.any() and _rms(side) <= ODOM_FRAME_SHARE * _rms(vy[test]):
+            keep = fin | fixed
+            out = vx.copy()
+            out[test] = fwd
             notes.append(f"{topic}: the twist is in the odom frame (its lateral speed, {lateral:.2g} m/s rms, is "
                          "the heading's; REP 105 puts it in child_frame_id): rotated into the body by the pose's yaw"
-                         + (f"; {int((~fin).sum())} rows without a pose to rotate by left out" if not fin.all() else ""))
-            return t[fin], fwd, wz[fin]
+                         + (f"; {int((~keep).sum())} rows without a pose to rotate by left out" if not keep.all()
+                            else ""))
+            return t[keep], out[keep], wz[keep]
     if lateral > LATERAL_SHARE * forward:
         warnings.append(f"{topic}: the twist has a lateral speed of {lateral:.2g} m/s rms beside a forward "
                         f"{forward:.2g} m/s: not a differential drive's body-frame twist (a skid or holonomic base, "
