@@ -942,8 +942,11 @@ POSE_MOVING_V = 0.01
 #: which holds the step (a pose-only driver at a stop).
 POSE_STOP_PERIODS = 5.0
 #: The baseline [s] over which a pose's steps are compared with its yaw
-#: (a yaw that does not follow the motion; a pose's jitter averages out).
+#: (a yaw that does not follow the motion; a pose's jitter averages out),
+#: and the least sideways speed said [m/s] (a pivoting robot's chord over a
+#: second is short and off its midpoint heading: 0.009 m/s, a probe's).
 POSE_SIDE_BASELINE_S = 1.0
+POSE_SIDE_MIN_V = 0.05
 #: A twist whose lateral speed's rms is more than this share of its forward
 #: one: not a differential drive's body-frame twist (REP 105: the twist is in
 #: child_frame_id) (_body_twist).
@@ -1019,19 +1022,29 @@ class _PoseTrack:
         d2 = [np.diff(c, 2) for c in (self.x, self.y, 0.5 * self.track * self.yaw)]
         return float(1.4826 * np.median(np.sqrt(d2[0] ** 2 + d2[1] ** 2 + d2[2] ** 2)) / np.sqrt(6.0))
 
+    def _has_jump(self, idx: np.ndarray) -> np.ndarray:
+        """(len(idx) - 1,) True where the intervals between updates idx[i]
+        and idx[i + 1] hold a jump."""
+        c = np.concatenate([[0], np.cumsum(self.jump)])
+        return (c[idx[1:]] - c[idx[:-1]]) > 0
+
     def _baseline(self) -> np.ndarray:
         """Every POSE_SIDE_BASELINE_S's update index (at least every one)."""
         k = max(1, int(round(POSE_SIDE_BASELINE_S / self.period))) if self.period > 0 else 1
         idx = np.arange(0, self.t.size, k)
         return idx if idx[-1] == self.t.size - 1 else np.append(idx, self.t.size - 1)
 
-    def moved(self) -> tuple[float, float]:
-        """How far the pose's wheels travel [m] and how far it turns [rad],
-        over POSE_SIDE_BASELINE_S steps, each less three times its noise
-        (a parked robot's jittery pose, summed update by update, travelled
-        57.7 m in a second read's minute), jumps left out."""
+    def moved(self, t0: float = -np.inf, t1: float = np.inf) -> tuple[float, float]:
+        """How far the pose's wheels travel [m] and how far it turns [rad]
+        (between t0 and t1 [s]), over POSE_SIDE_BASELINE_S steps, each less
+        three times its noise (a parked robot's jittery pose, summed update
+        by update, travelled 57.7 m in a second read's minute), jumps left
+        out."""
         idx = self._baseline()
-        bad = np.add.reduceat(self.jump.astype(int), idx[:-1]) > 0 if self.jump.size else np.zeros(0, bool)
+        idx = idx[(self.t[idx] >= t0) & (self.t[idx] <= t1)]
+        if idx.size < 2:
+            return 0.0, 0.0
+        bad = self._has_jump(idx)
         dp = np.hypot(np.diff(self.x[idx]), np.diff(self.y[idx]))
         dth = np.abs(np.diff(self.yaw[idx]))
         floor = 3.0 * np.sqrt(2.0) * self.noise
@@ -1052,19 +1065,22 @@ class _PoseTrack:
 
     def rows(self, t_msgs: np.ndarray):
         """Pose-only rows (times, forward, yaw rate): each interval's mean at
-        its midpoint; an interval longer than POSE_STOP_PERIODS periods is a
-        stop: 0 at the messages (t_msgs) inside it, the step in its last
-        period."""
+        its midpoint, or, for an interval longer than POSE_STOP_PERIODS
+        periods (a stop, updates that came late, or messages missing), the
+        same mean at each message (t_msgs) inside it, so that a stop leaves
+        no gap in the rows. Never the step squeezed into a shorter time: a
+        stop cannot be told from a late update (a probe: random update times
+        read as stops, their steps in one period, 16 m/s rows, z -30)."""
         keep = ~self.jump
-        stop = keep & self.stop
-        go = keep & ~stop
-        ts, vs, ws = [self.mid[go]], [self.fwd[go]], [self.om[go]]
-        for i in np.flatnonzero(stop):
-            p = self.period
-            still = t_msgs[(t_msgs > self.t[i]) & (t_msgs < self.t[i + 1] - p)]
-            ts += [still, [self.t[i + 1] - 0.5 * p]]
-            vs += [np.zeros(still.size), [self.fwd[i] * self.dt[i] / p]]
-            ws += [np.zeros(still.size), [self.om[i] * self.dt[i] / p]]
+        long = keep & self.stop
+        ts, vs, ws = [self.mid[keep & ~long]], [self.fwd[keep & ~long]], [self.om[keep & ~long]]
+        for i in np.flatnonzero(long):
+            inside = t_msgs[(t_msgs > self.t[i]) & (t_msgs < self.t[i + 1])]
+            if inside.size == 0:
+                inside = self.mid[i:i + 1]
+            ts.append(inside)
+            vs.append(np.full(inside.size, self.fwd[i]))
+            ws.append(np.full(inside.size, self.om[i]))
         t, v, w = (np.concatenate([np.asarray(a, float) for a in c]) for c in (ts, vs, ws))
         order = np.argsort(t, kind="stable")
         return t[order], v[order], w[order]
@@ -1078,6 +1094,8 @@ class _PoseTrack:
         h = self.yaw[idx][:-1] + 0.5 * dyaw
         dt = np.diff(self.t[idx])
         ok = dt < 2 * k * POSE_STOP_PERIODS * self.period if self.period > 0 else np.ones(dt.size, bool)
+        # a reset's window is no step of the robot's (a probe: a false "sideways" at every reset)
+        ok &= ~self._has_jump(idx)
         fwd = (np.cos(h) * dx + np.sin(h) * dy)[ok] / dt[ok]
         side = (-np.sin(h) * dx + np.cos(h) * dy)[ok] / dt[ok]
         return _rms(side), _rms(fwd)
@@ -1122,13 +1140,13 @@ def _body_twist(topic, t, vx, vy, wz, px, py, yaw, track, notes, warnings):
     zero = (vx == 0) & (vy == 0) & (wz == 0)
     moved, turned = pose.moved()
     jumps = (f"; {int(pose.jump.sum())} pose jump(s) (a driver resetting it?) left out" if pose.jump.any() else "")
-    held = (f"; {pose.held} messages repeat the pose before them (republished between updates): "
-            "the speeds go by its updates" if pose.held > 0.1 * t.size else "")
+    held = (f"; the speeds go by the pose's updates ({pose.held} messages repeat the pose before them)"
+            if pose.held > 0.1 * t.size else "")
     if zero.all() and moved >= POSE_ONLY_M:
         notes.append(f"{topic}: every twist is zero while the pose's wheels travel {moved:.1f} m: the speeds are "
                      "the pose's differences (each interval's mean, at its midpoint)" + jumps + held)
         side, fwd = pose.sideways()
-        if side > LATERAL_SHARE * fwd:
+        if side > max(LATERAL_SHARE * fwd, POSE_SIDE_MIN_V):
             warnings.append(f"{topic}: the pose steps sideways to its own heading ({side:.2g} m/s rms beside a "
                             f"forward {fwd:.2g}, over {POSE_SIDE_BASELINE_S:g} s): its yaw does not follow the "
                             "motion, and the forward speeds taken from it are short")
@@ -1155,21 +1173,28 @@ def _body_twist(topic, t, vx, vy, wz, px, py, yaw, track, notes, warnings):
     else:
         placeholder = np.zeros(t.size, bool)
         for k0, k1 in _zero_runs(zero):
-            s0, s1 = max(k0 - 1, 0), min(k1 + 1, t.size - 1)
             nb = [j for j in (k0 - 1, k1 + 1) if 0 <= j < t.size and not zero[j]]
             if not nb:
                 continue
+            # the run's own intervals: message m's twist is the motion over (t[m-1], t[m]]. A
+            # genuine zero's pose does not move over its interval; the next message's motion is
+            # not the run's (a probe: every zero before a faster twist taken for a placeholder)
+            s0 = max(k0 - 1, 0)
             speed = float(np.mean([abs(vx[j]) + abs(vy[j]) + 0.5 * track * abs(wz[j]) for j in nb]))
-            said = speed * (t[s1] - t[s0])
-            went = float(pose.travel_between(t[s0], t[s1]))
+            said = speed * (t[k1] - t[s0])
+            went = float(pose.travel_between(t[s0], t[k1]))
             run = np.arange(k0, k1 + 1)[ok[k0:k1 + 1]]
             pace = (float(np.median(np.abs(pose.fwd[kk[run]]) + 0.5 * track * np.abs(pose.om[kk[run]])))
                     if run.size else 0.0)
             # as far and as fast as the twists either side say, give or take: a robot that stopped
             # hardly moves, and a fused pose's jitter (a probe's: 1 cm) beside creeping twists goes
             # much faster than they say
-            if (max(POSE_STEP_M, PLACEHOLDER_SHARE * said) <= went <= said / PLACEHOLDER_SHARE + POSE_STEP_M
-                    and PLACEHOLDER_SHARE * speed <= pace <= speed / PLACEHOLDER_SHARE):
+            near = (max(POSE_STEP_M, PLACEHOLDER_SHARE * said) <= went <= said / PLACEHOLDER_SHARE + POSE_STEP_M
+                    and PLACEHOLDER_SHARE * speed <= pace <= speed / PLACEHOLDER_SHARE)
+            # a long run (a driver warming up, or dropping out) is judged by the pose alone: one
+            # neighbour's speed says little of seconds of driving (a probe: 10 s left zero, 16 % short)
+            far = pose.moved(t[s0], t[k1])[0] >= POSE_ONLY_M
+            if near or far:
                 placeholder[k0:k1 + 1] = True
         if placeholder.any():
             use, out = placeholder & ok, placeholder & ~ok
