@@ -926,6 +926,9 @@ POSE_TURN_RAD = 1.0
 #: as 1 m/s rows), and the travel at least POSE_STEP_M [m].
 PLACEHOLDER_SHARE = 0.5
 POSE_STEP_M = 2e-3
+#: A pose that repeats itself in at most this share of the messages whose
+#: twist moves follows the twist message by message (_body_twist).
+POSE_FOLLOWS_REPEATS = 0.05
 #: A pose step faster than this many times the 90th percentile of the
 #: pose's moving speeds (above POSE_MOVING_V [m/s]), plus POSE_JUMP_V [m/s],
 #: or turning faster than POSE_JUMP_W [rad/s] plus as many times its 90th
@@ -998,9 +1001,13 @@ class _PoseTrack:
         self.travel = np.hypot(dx, dy) + 0.5 * track * np.abs(dyaw)
         self.period = float(np.median(dt)) if dt.size else 0.0
         self.stop = dt > POSE_STOP_PERIODS * self.period
-        # the speed each interval's row carries: a stop's step in its last period (rows)
-        carried = np.where(self.stop, self.period, dt)
-        speed, turn = np.hypot(dx, dy) / carried, np.abs(dyaw) / carried
+        # A jump is judged over the one message interval it arrives in: a reset at the end of a
+        # stop spread over the stop is a slow creep (a second read), and a late update or a gap in
+        # the messages at its own interval's speed is no jump (a probe: both read as resets).
+        # A republished pose's updates read its hold factor faster; so do its percentiles.
+        t_before = t[np.maximum(u[1:] - 1, 0)]
+        arrive = self.t[1:] - t_before
+        speed, turn = np.hypot(dx, dy) / arrive, np.abs(dyaw) / arrive
         moving = speed > POSE_MOVING_V
         self.jump = np.zeros(dt.size, bool)
         if moving.any():
@@ -1009,8 +1016,12 @@ class _PoseTrack:
             v90, w90 = np.percentile(speed[moving], 90), np.percentile(turn[moving], 90)
             self.jump = ((speed > POSE_JUMP_TIMES * v90 + POSE_JUMP_V)
                          | (turn > POSE_JUMP_TIMES * w90 + POSE_JUMP_W))
-        # repeats between updates while moving (not at a stop, where a pose stays by itself)
-        self.held = int((np.diff(u) - 1)[~self.stop].sum())
+        # repeats between updates while moving (not at a stop, where a pose stays by itself), when
+        # the pose updates slower than its messages come (not a stop's flicker of single ticks)
+        msg_period = float(np.median(np.diff(t))) if t.size > 1 else 0.0
+        self.held = (int((np.diff(u) - 1)[~self.stop].sum()) if self.period > 1.5 * msg_period else 0)
+        # the messages: their times and the intervals between them (rows)
+        self.t_msgs = t
         self.noise = self._noise()
 
     def _noise(self) -> float:
@@ -1063,27 +1074,21 @@ class _PoseTrack:
         d = [np.interp(t1, self.t, c) - np.interp(t0, self.t, c) for c in (self.x, self.y, self.yaw)]
         return np.hypot(d[0], d[1]) + 0.5 * self.track * np.abs(d[2])
 
-    def rows(self, t_msgs: np.ndarray):
-        """Pose-only rows (times, forward, yaw rate): each interval's mean at
-        its midpoint, or, for an interval longer than POSE_STOP_PERIODS
-        periods (a stop, updates that came late, or messages missing), the
-        same mean at each message (t_msgs) inside it, so that a stop leaves
-        no gap in the rows. Never the step squeezed into a shorter time: a
-        stop cannot be told from a late update (a probe: random update times
-        read as stops, their steps in one period, 16 m/s rows, z -30)."""
-        keep = ~self.jump
-        long = keep & self.stop
-        ts, vs, ws = [self.mid[keep & ~long]], [self.fwd[keep & ~long]], [self.om[keep & ~long]]
-        for i in np.flatnonzero(long):
-            inside = t_msgs[(t_msgs > self.t[i]) & (t_msgs < self.t[i + 1])]
-            if inside.size == 0:
-                inside = self.mid[i:i + 1]
-            ts.append(inside)
-            vs.append(np.full(inside.size, self.fwd[i]))
-            ws.append(np.full(inside.size, self.om[i]))
-        t, v, w = (np.concatenate([np.asarray(a, float) for a in c]) for c in (ts, vs, ws))
-        order = np.argsort(t, kind="stable")
-        return t[order], v[order], w[order]
+    def rows(self):
+        """Pose-only rows (times, forward, yaw rate): one per interval
+        between messages, at its midpoint, carrying the mean over the pose
+        update that holds it (the pose's own interval where it updates at
+        every message: exact). One layout at the messages' rate, whether the
+        pose updates at every message, is republished between late updates,
+        or stands still (a probe: rows at irregular update midpoints beside
+        100 Hz rows at stops put batch at z -21; a step squeezed into a
+        stop's last period read 16 m/s). Jumps left out."""
+        tm = self.t_msgs
+        mid = 0.5 * (tm[1:] + tm[:-1])
+        k = self.interval(tm[1:])
+        ok = k >= 0
+        ok[ok] = ~self.jump[k[ok]]
+        return mid[ok], self.fwd[k[ok]], self.om[k[ok]]
 
     def sideways(self) -> tuple[float, float]:
         """The rms lateral and forward speeds [m/s] of the pose's steps over
@@ -1150,7 +1155,7 @@ def _body_twist(topic, t, vx, vy, wz, px, py, yaw, track, notes, warnings):
             warnings.append(f"{topic}: the pose steps sideways to its own heading ({side:.2g} m/s rms beside a "
                             f"forward {fwd:.2g}, over {POSE_SIDE_BASELINE_S:g} s): its yaw does not follow the "
                             "motion, and the forward speeds taken from it are short")
-        return pose.rows(t)
+        return pose.rows()
     k = pose.interval(t)
     ok = k >= 0
     kk = np.where(ok, k, 0)
@@ -1172,6 +1177,19 @@ def _body_twist(topic, t, vx, vy, wz, px, py, yaw, track, notes, warnings):
         filled = ok.copy()
     else:
         placeholder = np.zeros(t.size, bool)
+        # A pose that follows the twist message by message (a wheel odometry's, integrated at each
+        # message) is judged at the messages: a genuine zero's pose repeats the one before it. A
+        # pose that updates late (republished) only between its updates (travel_between), where a
+        # genuine zero cannot be told (a probe: a 100 ticks/m encoder's genuine zeros, read through
+        # the interpolated pose, were rebuilt: path 106-113 %, z +5).
+        rep = np.zeros(t.size, bool)
+        rep[1:] = (np.diff(px) == 0) & (np.diff(py) == 0) & (np.diff(yaw) == 0)
+        mov = ~zero & fin
+        mov[0] = False
+        follows = bool(mov.any()) and float(rep[mov].mean()) <= POSE_FOLLOWS_REPEATS
+        with np.errstate(invalid="ignore", divide="ignore"):
+            msg_pace = np.concatenate([[np.nan], (np.hypot(np.diff(px), np.diff(py)) + 0.5 * track * np.abs(
+                np.angle(np.exp(1j * np.diff(yaw))))) / np.diff(t)])
         for k0, k1 in _zero_runs(zero):
             nb = [j for j in (k0 - 1, k1 + 1) if 0 <= j < t.size and not zero[j]]
             if not nb:
@@ -1182,10 +1200,16 @@ def _body_twist(topic, t, vx, vy, wz, px, py, yaw, track, notes, warnings):
             s0 = max(k0 - 1, 0)
             speed = float(np.mean([abs(vx[j]) + abs(vy[j]) + 0.5 * track * abs(wz[j]) for j in nb]))
             said = speed * (t[k1] - t[s0])
-            went = float(pose.travel_between(t[s0], t[k1]))
             run = np.arange(k0, k1 + 1)[ok[k0:k1 + 1]]
-            pace = (float(np.median(np.abs(pose.fwd[kk[run]]) + 0.5 * track * np.abs(pose.om[kk[run]])))
-                    if run.size else 0.0)
+            if follows and fin[s0] and fin[k1]:
+                went = float(np.hypot(px[k1] - px[s0], py[k1] - py[s0])
+                             + 0.5 * track * abs(np.angle(np.exp(1j * (yaw[k1] - yaw[s0])))))
+                paces = msg_pace[k0:k1 + 1]
+                pace = float(np.median(paces[np.isfinite(paces)])) if np.isfinite(paces).any() else 0.0
+            else:
+                went = float(pose.travel_between(t[s0], t[k1]))
+                pace = (float(np.median(np.abs(pose.fwd[kk[run]]) + 0.5 * track * np.abs(pose.om[kk[run]])))
+                        if run.size else 0.0)
             # as far and as fast as the twists either side say, give or take: a robot that stopped
             # hardly moves, and a fused pose's jitter (a probe's: 1 cm) beside creeping twists goes
             # much faster than they say
