@@ -926,9 +926,6 @@ POSE_TURN_RAD = 1.0
 #: as 1 m/s rows), and the travel at least POSE_STEP_M [m].
 PLACEHOLDER_SHARE = 0.5
 POSE_STEP_M = 2e-3
-#: A pose that repeats itself in at most this share of the messages whose
-#: twist moves follows the twist message by message (_body_twist).
-POSE_FOLLOWS_REPEATS = 0.05
 #: A pose step faster than this many times the 90th percentile of the
 #: pose's moving speeds (above POSE_MOVING_V [m/s]), plus POSE_JUMP_V [m/s],
 #: or turning faster than POSE_JUMP_W [rad/s] plus as many times its 90th
@@ -937,6 +934,7 @@ POSE_FOLLOWS_REPEATS = 0.05
 #: (a second read: a 60-message bag's reset read as a -19.5 m/s row); a
 #: stop's step is judged at the speed its row will carry (_PoseTrack.rows).
 POSE_JUMP_TIMES = 5.0
+POSE_JUMP_NEIGHBOURS = 1.5
 POSE_JUMP_V = 0.5
 POSE_JUMP_W = 10.0
 POSE_MOVING_V = 0.01
@@ -995,8 +993,11 @@ class _PoseTrack:
         mid_yaw = self.yaw[:-1] + 0.5 * dyaw
         dx, dy = np.diff(self.x), np.diff(self.y)
         self.dt, self.mid = dt, 0.5 * (self.t[1:] + self.t[:-1])
-        self.fwd = (np.cos(mid_yaw) * dx + np.sin(mid_yaw) * dy) / dt
-        self.side = (-np.sin(mid_yaw) * dx + np.cos(mid_yaw) * dy) / dt
+        # the arc, not its chord: a step turning by dyaw is chord * (dyaw/2) / sin(dyaw/2) long at a
+        # steady turn (a probe: 1 s gaps in a turning pose-only bag read short, track z -3.1)
+        arc = 1.0 / np.sinc(dyaw / (2.0 * np.pi))
+        self.fwd = arc * (np.cos(mid_yaw) * dx + np.sin(mid_yaw) * dy) / dt
+        self.side = arc * (-np.sin(mid_yaw) * dx + np.cos(mid_yaw) * dy) / dt
         self.om = dyaw / dt
         self.travel = np.hypot(dx, dy) + 0.5 * track * np.abs(dyaw)
         self.period = float(np.median(dt)) if dt.size else 0.0
@@ -1014,8 +1015,15 @@ class _PoseTrack:
             # percentiles over moving intervals: a mostly idle bag's would be 0 (a probe: 93 of 110
             # driving rows of an 11 s drive after 25 min at rest taken for jumps)
             v90, w90 = np.percentile(speed[moving], 90), np.percentile(turn[moving], 90)
-            self.jump = ((speed > POSE_JUMP_TIMES * v90 + POSE_JUMP_V)
-                         | (turn > POSE_JUMP_TIMES * w90 + POSE_JUMP_W))
+            sudden = ((speed > POSE_JUMP_TIMES * v90 + POSE_JUMP_V)
+                      | (turn > POSE_JUMP_TIMES * w90 + POSE_JUMP_W))
+            # ...and faster over its own update interval than the intervals either side: a pose held
+            # while the robot drives, then caught up, is as fast as its neighbours (a probe: holds of
+            # 6-60 messages taken for resets, z -4 to -5), a reset is not
+            v_upd, w_upd = np.hypot(dx, dy) / dt, np.abs(dyaw) / dt
+            pad = lambda a: np.maximum(np.concatenate([a[1:], [0.0]]), np.concatenate([[0.0], a[:-1]]))
+            self.jump = sudden & ((v_upd > POSE_JUMP_NEIGHBOURS * pad(v_upd) + POSE_MOVING_V)
+                                  | (w_upd > POSE_JUMP_NEIGHBOURS * pad(w_upd) + 10 * POSE_MOVING_V))
         # repeats between updates while moving (not at a stop, where a pose stays by itself), when
         # the pose updates slower than its messages come (not a stop's flicker of single ticks)
         msg_period = float(np.median(np.diff(t))) if t.size > 1 else 0.0
@@ -1177,19 +1185,18 @@ def _body_twist(topic, t, vx, vy, wz, px, py, yaw, track, notes, warnings):
         filled = ok.copy()
     else:
         placeholder = np.zeros(t.size, bool)
-        # A pose that follows the twist message by message (a wheel odometry's, integrated at each
-        # message) is judged at the messages: a genuine zero's pose repeats the one before it. A
-        # pose that updates late (republished) only between its updates (travel_between), where a
-        # genuine zero cannot be told (a probe: a 100 ticks/m encoder's genuine zeros, read through
-        # the interpolated pose, were rebuilt: path 106-113 %, z +5).
-        rep = np.zeros(t.size, bool)
-        rep[1:] = (np.diff(px) == 0) & (np.diff(py) == 0) & (np.diff(yaw) == 0)
-        mov = ~zero & fin
-        mov[0] = False
-        follows = bool(mov.any()) and float(rep[mov].mean()) <= POSE_FOLLOWS_REPEATS
-        with np.errstate(invalid="ignore", divide="ignore"):
-            msg_pace = np.concatenate([[np.nan], (np.hypot(np.diff(px), np.diff(py)) + 0.5 * track * np.abs(
-                np.angle(np.exp(1j * np.diff(yaw))))) / np.diff(t)])
+        # The twists' own travel, message by message (each the motion over the interval before it):
+        # a run of zeros is a placeholder when the pose, between the updates around it, went further
+        # than the twists there say, by about what the run's neighbours would have driven. A genuine
+        # zero (a coarse encoder's), or one whose motion the next twist carries, leaves nothing
+        # missing (probes: rebuilt genuine zeros, path 106-113 %, z +5; stale reads kept, z -21).
+        step_said = np.concatenate([[0.0], (np.hypot(vx[1:], vy[1:]) + 0.5 * track * np.abs(wz[1:]))
+                                    * np.diff(t)])
+        said_cum = np.cumsum(step_said)
+        changed = np.zeros(t.size, bool)
+        changed[0] = True
+        changed[1:] = ~((np.diff(px) == 0) & (np.diff(py) == 0) & (np.diff(yaw) == 0)) & fin[1:]
+        updates = np.flatnonzero(changed & fin)
         for k0, k1 in _zero_runs(zero):
             nb = [j for j in (k0 - 1, k1 + 1) if 0 <= j < t.size and not zero[j]]
             if not nb:
@@ -1198,22 +1205,24 @@ def _body_twist(topic, t, vx, vy, wz, px, py, yaw, track, notes, warnings):
             # genuine zero's pose does not move over its interval; the next message's motion is
             # not the run's (a probe: every zero before a faster twist taken for a placeholder)
             s0 = max(k0 - 1, 0)
-            speed = float(np.mean([abs(vx[j]) + abs(vy[j]) + 0.5 * track * abs(wz[j]) for j in nb]))
+            # (the speed in whatever frame the twist is in: its length)
+            speed = float(np.mean([np.hypot(vx[j], vy[j]) + 0.5 * track * abs(wz[j]) for j in nb]))
             said = speed * (t[k1] - t[s0])
             run = np.arange(k0, k1 + 1)[ok[k0:k1 + 1]]
-            if follows and fin[s0] and fin[k1]:
-                went = float(np.hypot(px[k1] - px[s0], py[k1] - py[s0])
-                             + 0.5 * track * abs(np.angle(np.exp(1j * (yaw[k1] - yaw[s0])))))
-                paces = msg_pace[k0:k1 + 1]
-                pace = float(np.median(paces[np.isfinite(paces)])) if np.isfinite(paces).any() else 0.0
-            else:
-                went = float(pose.travel_between(t[s0], t[k1]))
-                pace = (float(np.median(np.abs(pose.fwd[kk[run]]) + 0.5 * track * np.abs(pose.om[kk[run]])))
-                        if run.size else 0.0)
-            # as far and as fast as the twists either side say, give or take: a robot that stopped
-            # hardly moves, and a fused pose's jitter (a probe's: 1 cm) beside creeping twists goes
-            # much faster than they say
-            near = (max(POSE_STEP_M, PLACEHOLDER_SHARE * said) <= went <= said / PLACEHOLDER_SHARE + POSE_STEP_M
+            # the pose's updates around the run: the last at or before s0, the first after k1
+            a = updates[updates <= s0]
+            b = updates[updates > k1]
+            ua, ub = (int(a[-1]) if a.size else s0), (int(b[0]) if b.size else t.size - 1)
+            went = (float(np.hypot(px[ub] - px[ua], py[ub] - py[ua])
+                          + 0.5 * track * abs(np.angle(np.exp(1j * (yaw[ub] - yaw[ua])))))
+                    if fin[ua] and fin[ub] else 0.0)
+            missing = went - float(said_cum[ub] - said_cum[ua])
+            pace = (float(np.median(np.abs(pose.fwd[kk[run]]) + 0.5 * track * np.abs(pose.om[kk[run]])))
+                    if run.size else 0.0)
+            # about what the neighbours say the run drove, give or take: a robot that stopped misses
+            # nothing, and a fused pose's jitter (a probe's: 1 cm) beside creeping twists misses far
+            # more, and faster, than they say
+            near = (max(POSE_STEP_M, PLACEHOLDER_SHARE * said) <= missing <= said / PLACEHOLDER_SHARE + POSE_STEP_M
                     and PLACEHOLDER_SHARE * speed <= pace <= speed / PLACEHOLDER_SHARE)
             # a long run (a driver warming up, or dropping out) is judged by the pose alone: one
             # neighbour's speed says little of seconds of driving (a probe: 10 s left zero, 16 % short)
