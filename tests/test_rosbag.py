@@ -634,6 +634,24 @@ def test_irregular_updates_gaps_warm_up_and_jitter_from_a_third_probe():
     tt, fwd, w = _body_twist("/odom", t, vc, zero, wz, xs, ys, ths, 0.5, notes, [])
     np.testing.assert_array_equal(fwd, vc)
     assert not any("zero twist" in n for n in notes)
+    # the pose republished at 100 Hz and updated at every 10th message, 10 % of the twists zero: the
+    # zeros in one update are judged together (a sixth probe: each against the whole, 2-3 in one update
+    # were kept, path 95 %, z -19)
+    t, v, om, x, y, yaw = _twist_rows(n=3000, hz=100.0, heading=1.0)
+    zero = np.zeros_like(t)
+    last = (np.arange(t.size) // 10) * 10
+    gone = np.flatnonzero(rng.random(t.size) < 0.1)
+    gone = gone[(gone > 10) & (gone < t.size - 20)]
+    vx, wz = v.copy(), om.copy()
+    vx[gone], wz[gone] = 0.0, 0.0
+    notes = []
+    tt, fwd, w = _body_twist("/odom", t, vx, zero, wz, x[last], y[last], yaw[last], 0.5, notes, [])
+    j = np.searchsorted(t, tt)
+    assert np.abs(fwd - v[j])[np.isin(j, gone)].max() < 0.2
+    assert any(f"{gone.size} messages with a zero twist while the pose moved" in n for n in notes)
+    assert np.trapezoid(fwd, tt) == pytest.approx(np.trapezoid(v, t), rel=0.01)
+    t, v, om, x, y, yaw = _twist_rows(n=3000, hz=50.0, heading=1.0)
+    zero = np.zeros_like(t)
     # a pose that updates at every message but stalls for 6-10 messages five times while the robot
     # drives: caught up, not a reset (a fifth probe: taken for jumps, their rows left out, z -4)
     xs, ys, ths = x.copy(), y.copy(), yaw.copy()
