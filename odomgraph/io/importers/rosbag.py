@@ -1218,11 +1218,14 @@ def _body_twist(topic, t, vx, vy, wz, px, py, yaw, track, notes, warnings):
         # Each zero's motion lies in the pose update that brings it, (ua, ub]; the zeros in one
         # update are judged together: what the pose went there beyond the twists is all of theirs
         # (a probe: 2-3 zeros in one held update, each judged against the whole, were kept: path
-        # 95 %, z -19).
+        # 95 %, z -19). An update whose own message has a zero twist is joined to the next: the
+        # next twist may carry the zero's motion (a probe: such zeros filled and counted twice,
+        # path 104 %, track z +8.4).
+        breaks = np.union1d(updates[~zero[updates]], [t.size - 1])
+
         def update_of(m: int) -> tuple[int, int]:
-            i = int(np.searchsorted(updates, m, side="left"))
-            return (int(updates[i - 1]) if i >= 1 else max(m - 1, 0)), (int(updates[i]) if i < updates.size
-                                                                         else t.size - 1)
+            i = int(np.searchsorted(breaks, m, side="left"))
+            return (int(breaks[i - 1]) if i >= 1 else 0), (int(breaks[i]) if i < breaks.size else t.size - 1)
         said_in: dict[tuple[int, int], float] = {}
         keys = {}
         for k0, k1, speed, _, _ in runs:
