@@ -43,6 +43,7 @@ from pathlib import Path
 import numpy as np
 
 from odomgraph.errors import LogFormatError
+from odomgraph.factors._math import wrap_angle
 from odomgraph.io.csvtable import ORIGIN_ABOVE
 from odomgraph.io.geodesy import latlon_to_local
 from odomgraph.io.log import Encoders, Gps, Gyro, Log, WheelSpeeds
@@ -976,11 +977,10 @@ class _PoseTrack:
     may republish a pose faster than it updates it (a probe: 50 Hz messages,
     a new pose every 5th, read as speeds 0, 0, 0, 0, 5v), so only the
     messages whose pose differs from the one before count. Per interval
-    between updates (K - 1,): ``mid`` [s], body ``fwd``/``side`` speeds
-    [m/s] (the step rotated into the body at the interval's mean heading),
-    yaw rate ``om`` [rad/s], the wheels' ``travel`` [m] (translation +
-    track / 2 |turn|) and ``jump`` (POSE_JUMP_TIMES: a driver resetting its
-    pose)."""
+    between updates (K - 1,): ``dt`` [s], the body's forward speed ``fwd``
+    [m/s] (the step's arc rotated into the body at the interval's mean
+    heading), yaw rate ``om`` [rad/s] and ``jump`` (POSE_JUMP_TIMES: a
+    driver resetting its pose)."""
 
     def __init__(self, t, x, y, yaw, track):
         same = (np.diff(x) == 0) & (np.diff(y) == 0) & (np.diff(yaw) == 0)
@@ -992,14 +992,12 @@ class _PoseTrack:
         dyaw = np.diff(self.yaw)
         mid_yaw = self.yaw[:-1] + 0.5 * dyaw
         dx, dy = np.diff(self.x), np.diff(self.y)
-        self.dt, self.mid = dt, 0.5 * (self.t[1:] + self.t[:-1])
+        self.dt = dt
         # the arc, not its chord: a step turning by dyaw is chord * (dyaw/2) / sin(dyaw/2) long at a
         # steady turn (a probe: 1 s gaps in a turning pose-only bag read short, track z -3.1)
         arc = 1.0 / np.sinc(dyaw / (2.0 * np.pi))
         self.fwd = arc * (np.cos(mid_yaw) * dx + np.sin(mid_yaw) * dy) / dt
-        self.side = arc * (-np.sin(mid_yaw) * dx + np.cos(mid_yaw) * dy) / dt
         self.om = dyaw / dt
-        self.travel = np.hypot(dx, dy) + 0.5 * track * np.abs(dyaw)
         self.period = float(np.median(dt)) if dt.size else 0.0
         self.stop = dt > POSE_STOP_PERIODS * self.period
         # A jump is judged over the one message interval it arrives in: a reset at the end of a
@@ -1076,12 +1074,6 @@ class _PoseTrack:
         i = np.searchsorted(self.t, t, side="left") - 1
         return np.where((i >= 0) & (i < self.dt.size) & (t > self.t[0]), i, -1)
 
-    def travel_between(self, t0: np.ndarray, t1: np.ndarray) -> np.ndarray:
-        """The wheels' travel [m] from the pose at t0 to the pose at t1
-        (each linear between updates)."""
-        d = [np.interp(t1, self.t, c) - np.interp(t0, self.t, c) for c in (self.x, self.y, self.yaw)]
-        return np.hypot(d[0], d[1]) + 0.5 * self.track * np.abs(d[2])
-
     def rows(self):
         """Pose-only rows (times, forward, yaw rate): one per interval
         between messages, at its midpoint, carrying the mean over the pose
@@ -1133,8 +1125,10 @@ def _body_twist(topic, t, vx, vy, wz, px, py, yaw, track, notes, warnings):
       - a part of every twist zero (linear.x never filled, or angular.z)
         while the pose moves or turns: that part from the pose, at each
         message's stamp (the interval that brings its motion);
-      - a run of zero twists among real ones across which the pose's wheels
-        travel (PLACEHOLDER_SHARE): those rows from the pose;
+      - zero twists among real ones whose motion the pose, between its
+        updates, holds beyond what the twists there say (PLACEHOLDER_SHARE
+        of what their neighbours would have driven): those rows from the
+        pose;
       - pose jumps (a driver resetting) left out;
       - a lateral speed that the pose's heading rotates away: a twist in
         the odom frame, rotated into the body (_frame_checked)."""
@@ -1235,7 +1229,7 @@ def _body_twist(topic, t, vx, vy, wz, px, py, yaw, track, notes, warnings):
         near_in = {}
         for (ua, ub), total in said_in.items():
             went = (float(np.hypot(px[ub] - px[ua], py[ub] - py[ua])
-                          + 0.5 * track * abs(np.angle(np.exp(1j * (yaw[ub] - yaw[ua])))))
+                          + 0.5 * track * abs(wrap_angle(yaw[ub] - yaw[ua])))
                     if fin[ua] and fin[ub] else 0.0)
             missing = went - float(said_cum[ub] - said_cum[ua])
             # about what the neighbours say the zeros drove, give or take: a robot that stopped misses
