@@ -56,7 +56,7 @@ ONLINE_SEEDS = tuple(range(81, 89))
 
 def _online_rows() -> list[dict]:
     """Per seed: status, the worse of x/y coverage of online.csv inside +-3
-    sigma, its largest error [m] and error / sigma, recoveries, and whether
+    sigma, its largest error [m] and error / sigma, recoveries (departures included), and whether
     the heading was said to be unknown."""
     from odomgraph.errors import EstimatorDivergedError
     from odomgraph.sim.scenarios import yard
@@ -76,7 +76,7 @@ def _online_rows() -> list[dict]:
         z = np.maximum(np.abs(ex) / o.sigma[:, 0], np.abs(ey) / o.sigma[:, 1])
         out.append({"seed": seed, "status": status_of(est)[0], "coverage": float(np.mean(z <= 3.0)),
                     "max_error_m": float(np.hypot(ex, ey).max()), "max_z": float(z.max()),
-                    "recoveries": len(est.recoveries),
+                    "recoveries": len(est.recoveries) + len(est.departures),
                     "jump_flagged": any("landed further" in w for w in est.flags),
                     "heading_unknown": any("heading not observable" in w for w in est.warnings)})
     return out

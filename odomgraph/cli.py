@@ -330,6 +330,8 @@ def _print_summary(s: dict) -> None:
              f"{s.get('downweighted', {}).get(sensor, 0)} down-weighted", level=2)
     for r in s.get("recoveries", []):
         _out(f"  recovery: {r}", level=2)
+    for r in s.get("departures", []):
+        _out(f"  departure: {r}", level=2)
     for sensor, v in s.get("noise_scales", {}).items():
         _out(f"  noise scale {sensor}: measured {v['measured']:.2f}, applied {v['applied']:.2f}", level=2)
     why = "; ".join(s.get("status_reasons", []))

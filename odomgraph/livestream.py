@@ -47,7 +47,8 @@ def run_stream(online: Online, lines: Iterable[str], out: IO[str], err: IO[str],
     out.write(HEADER + "\n")
     out.flush()
     next_t = [-math.inf]
-    said = [len(online.ekf.recoveries) if online.ekf is not None else 0, len(online.restarts), len(online.alerts)]
+    said = [len(online.ekf.recoveries) if online.ekf is not None else 0, len(online.restarts), len(online.alerts),
+            len(online.ekf.departures) if online.ekf is not None else 0]
     wall0 = t_first = None
     last_ckpt = None
 
@@ -67,6 +68,12 @@ def run_stream(online: Online, lines: Iterable[str], out: IO[str], err: IO[str],
                 err.write(f"odomgraph: recovered: {msg}\n")
             said[0] = len(eng.recoveries)
             err.flush()
+        deps = getattr(eng, "departures", [])
+        if len(deps) > said[3]:
+            for msg in deps[said[3]:]:
+                err.write(f"odomgraph: followed a departure: {msg}\n")
+            said[3] = len(deps)
+            err.flush()
         if len(online.alerts) > said[2]:
             for msg in online.alerts[said[2]:]:
                 err.write(f"odomgraph: warning: {msg}\n")
@@ -76,7 +83,7 @@ def run_stream(online: Online, lines: Iterable[str], out: IO[str], err: IO[str],
             for msg in online.restarts[said[1]:]:
                 err.write(f"odomgraph: restarted: {msg}\n")
             said[1] = len(online.restarts)
-            said[0] = 0                 # a new engine counts its recoveries from 0
+            said[0] = said[3] = 0       # a new engine counts its recoveries from 0
             err.flush()
 
     for n, line in enumerate(lines, 1):
@@ -153,6 +160,8 @@ def summary_lines(online: Online, st: StreamStats) -> list[str]:
         out.append(f"stream: {st.skipped_bad} lines could not be read and were skipped")
     if s["recoveries"]:
         out.append(f"stream: {len(s['recoveries'])} recoveries (said above as they happened)")
+    if s.get("departures"):
+        out.append(f"stream: {len(s['departures'])} departures followed (said above as they happened)")
     if s["restarts"]:
         out.append(f"stream: {len(s['restarts'])} restart(s), after a divergence or to take up the fixes' frame "
                    "(said above)")

@@ -820,6 +820,7 @@ class Online:
         return {"method": self.method.value, "t_origin": self.t_origin or 0, "accepted": accepted,
                 "rejected_by_gate": rejected, "rejected_late": dict(c.late),
                 "repeated_stamps": dict(c.repeated), "recoveries": list(eng.recoveries) if eng else [],
+                "departures": list(getattr(eng, "departures", [])),
                 "restarts": list(self.restarts), "rejected_ahead": dict(c.ahead),
                 "mean_nis": {k: {"mean": v[0] / v[1], "dof": v[2], "n": v[1]} for k, v in self._nis.items() if v[1]},
                 "warnings": warnings, "flags": self.flags(),

@@ -757,6 +757,8 @@ def warnings_of(est: Estimate, log: Log | None = None) -> list[str]:
         out.append(f"{s}: {n}{of} measurements rejected as outliers")
     for r in est.recoveries:
         out.append(f"{est.method} recovered at {r}")
+    for r in est.departures:
+        out.append(f"{est.method} followed a departure at {r}")
     unobs = est.unobservable()
     pinned = est.observability.unobservable if est.observability else {}
     for name, reason in unobs.items():
@@ -801,6 +803,7 @@ def summary(est: Estimate, log: Log, schedule: Schedule) -> dict:
         "downweighted": est.downweighted,
         "used": est.used,
         "recoveries": est.recoveries,
+        "departures": est.departures,
         **({"time_offsets": est.time_offsets} if est.time_offsets else {}),
         "noise_scales": est.noise_scales,
         "warnings": list(log.warnings) + warnings_of(est, log),

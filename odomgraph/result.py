@@ -55,6 +55,14 @@ class Estimate:
     """Measurements offered to the estimator, per sensor."""
     recoveries: list[str] = field(default_factory=list)
     """Each time the estimator caught itself diverging and recovered, with when and how."""
+    departures: list[str] = field(default_factory=list)
+    """Each time the EKF followed a step of the robot's (a stall, or its end:
+    three innovations of one sensor in a row drifting away from the state) by
+    widening its rate states, with when and how much (estimators.ekf.
+    departure_note). Not a recovery: the filter did not lose itself, so these
+    count towards neither "degraded" nor the EKF's MAX_RECOVERIES (a plow
+    stuck in a drift six times is six stalls, not a lost filter), but they
+    make a run "recovered"."""
     time_offsets: dict[str, dict[str, float]] = field(default_factory=dict)
     """Sensor time offsets estimated and applied, {"gps": {"value", "sigma"}} [s]."""
     noise_scales: dict[str, dict[str, float | str]] = field(default_factory=dict)
@@ -170,17 +178,8 @@ class Estimate:
 DEGRADED_REJECTED = 0.2
 
 
-#: What the EKF's recovery line of a departure says (estimators.ekf.departure_note).
+#: What the EKF's line of a departure says (estimators.ekf.departure_note).
 DEPARTURE_SAYS = "three in a row drift away from the state"
-
-
-def is_departure(line: str) -> bool:
-    """Whether a recovery line is an EKF departure's: the filter followed a
-    step of the robot's (a stall, or its end); it did not lose itself. A
-    departure makes a run "recovered", but it is not counted towards
-    "degraded" (more than 5 recoveries) nor towards the EKF's MAX_RECOVERIES:
-    a plow stuck in a drift six times is six stalls, not a lost filter."""
-    return DEPARTURE_SAYS in line
 
 
 def status_of(est: Estimate) -> tuple[str, list[str]]:
@@ -196,11 +195,12 @@ def status_of(est: Estimate) -> tuple[str, list[str]]:
             why.append(f"{s}: {n} of {used} measurements rejected")
     if any("iteration cap" in w for w in est.warnings):
         why.append("an iteration cap was hit")
-    rough = [r for r in est.recoveries if not is_departure(r)]
-    if len(rough) > 5:
-        why.append(f"{len(rough)} recoveries")
+    if len(est.recoveries) > 5:
+        why.append(f"{len(est.recoveries)} recoveries")
     if why:
         return "degraded", why
-    if est.recoveries:
-        return "recovered", [f"{len(est.recoveries)} recovery(ies)"]
+    said = ([f"{len(est.recoveries)} recovery(ies)"] if est.recoveries else []) + \
+           ([f"{len(est.departures)} departure(s) followed"] if est.departures else [])
+    if said:
+        return "recovered", said
     return "ok", []

@@ -77,7 +77,8 @@ def test_the_ekf_follows_a_stall_and_says_so(case, bound):
     z, err = position_errors(est, log)
     assert err <= bound and z <= 14.0, (z, err)
     assert status_of(est)[0] == "recovered", status_of(est)
-    assert any(DEPARTURE_SAYS in r for r in est.recoveries), est.recoveries
+    assert est.departures and all(DEPARTURE_SAYS in r for r in est.departures), est.departures
+    assert not any(DEPARTURE_SAYS in r for r in est.recoveries), est.recoveries
 
 
 def test_the_vectorised_ekf_follows_the_same_departures():
@@ -90,14 +91,13 @@ def test_the_vectorised_ekf_follows_the_same_departures():
         a = run_ekf(log, Schedule(20.0))
         np.testing.assert_allclose(b.mean, a.mean, rtol=0, atol=1e-9)
         np.testing.assert_allclose(b.sigma, a.sigma, rtol=0, atol=1e-9)
-        assert b.recoveries == a.recoveries
-    assert any("drift away" in r for r in many[0].recoveries)
-    assert not any("drift away" in r for r in many[1].recoveries)
+        assert b.recoveries == a.recoveries and b.departures == a.departures
+    assert many[0].departures and not many[1].departures
     a, b = run_ekf(logs[2], Schedule(20.0)), run_ekf_many([logs[2]], Schedule(20.0))[0]
     np.testing.assert_allclose(b.mean, a.mean, rtol=0, atol=1e-9)
     np.testing.assert_allclose(b.sigma, a.sigma, rtol=0, atol=1e-9)
-    assert b.recoveries == a.recoveries
-    assert any(r.startswith("t=45.") and f"gps: {DEPARTURE_SAYS}" in r for r in a.recoveries), a.recoveries
+    assert b.recoveries == a.recoveries and b.departures == a.departures
+    assert any(r.startswith("t=45.") and f"gps: {DEPARTURE_SAYS}" in r for r in a.departures), a.departures
 
 
 def test_a_filter_without_slip_states_keeps_them_out_of_a_departure():
@@ -109,29 +109,29 @@ def test_a_filter_without_slip_states_keeps_them_out_of_a_departure():
     a = run_ekf(log, Schedule(20.0), opt)
     b = run_ekf_many([log], Schedule(20.0), opt)[0]
     assert np.all(a.mean[:, 6:8] == 0.0) and np.all(a.sigma[:, 6:8] == 0.0)
-    first = a.recoveries[0]
+    first = a.departures[0]
     assert first.startswith("t=45.") and DEPARTURE_SAYS in first and "; v widened to " in first, first
     np.testing.assert_allclose(b.mean, a.mean, rtol=0, atol=1e-9)
     np.testing.assert_allclose(b.sigma, a.sigma, rtol=0, atol=1e-9)
-    assert b.recoveries == a.recoveries
+    assert b.recoveries == a.recoveries and b.departures == a.departures
 
 
 def test_stalls_again_and_again_are_not_a_lost_filter():
-    """Each stall's start and end is a departure, said as a recovery: six
-    stalls make a run "recovered", not "degraded" (more than 5 recoveries
-    would), and they do not count towards the EKF's MAX_RECOVERIES
-    (ekf.py: the same count). Measured: 12 departures and nothing else,
-    the largest error 0.86 m (counted, those 12 made it degraded)."""
-    from odomgraph.result import is_departure
+    """Each stall's start and end is a departure (Estimate.departures, not a
+    recovery): six stalls make a run "recovered", not "degraded" (more than
+    5 recoveries would), and they do not count towards the EKF's
+    MAX_RECOVERIES. Measured: 12 departures and nothing else, the largest
+    error 0.86 m (counted as recoveries, those 12 made it degraded)."""
     sc = yard(150.0).with_(slips=())
     sc = sc.with_(rates=replace(sc.rates, ranges=4.0, gps=0.0))
     sc = sc.with_(robot=sc.robot.with_(beacons=beacons_around_path(sc, 3)))
     stalls = tuple(Stall(t, t + 5.0, 1.0, 1.0) for t in (35.0, 55.0, 75.0, 95.0, 115.0, 135.0))
     log = inject(sc, Faults(stalls=stalls), 12).with_(gps=None)
     est = run_ekf(log, Schedule(20.0))
-    dep = [r for r in est.recoveries if is_departure(r)]
-    assert len(dep) >= 6 and len(est.recoveries) - len(dep) < 6, est.recoveries
-    assert status_of(est)[0] == "recovered", status_of(est)
+    assert len(est.departures) >= 6 and len(est.recoveries) < 6, (est.departures, est.recoveries)
+    assert all(DEPARTURE_SAYS in r for r in est.departures), est.departures
+    status, why = status_of(est)
+    assert status == "recovered" and why[-1] == f"{len(est.departures)} departure(s) followed", why
 
 
 BATCH_CASES = {   # logs the smoother's Huber slip steps were not designed on (graph.SLIP_STEP_K)

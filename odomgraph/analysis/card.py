@@ -110,8 +110,10 @@ def verdict(params: list[Parameter], summary: dict, failed: list[str]) -> tuple[
 def _counts(summary: dict) -> str:
     rej = sum(summary.get("rejected", {}).values())
     rec = len(summary.get("recoveries", []))
+    dep = len(summary.get("departures", []))
     parts = ([f"{rej} measurement{'s' if rej != 1 else ''} rejected"] if rej else []) + \
-            ([f"{rec} recover{'ies' if rec != 1 else 'y'}"] if rec else [])
+            ([f"{rec} recover{'ies' if rec != 1 else 'y'}"] if rec else []) + \
+            ([f"{dep} departure{'s' if dep != 1 else ''} followed"] if dep else [])
     return f"; {', '.join(parts)}" if parts else ""
 
 
@@ -170,9 +172,11 @@ def card_html(label: str, params: list[Parameter], summary: dict, reference_note
     if used:
         cells = "".join(f"<tr><td>{esc(s)}</td><td>{n}</td><td>{rej.get(s, 0)}</td></tr>" for s, n in used.items())
         parts.append("<table><tr><th>sensor</th><th>measurements</th><th>rejected</th></tr>" + cells + "</table>")
-    if rec:
-        parts.append(f"<p>{len(rec)} recover{'ies' if len(rec) != 1 else 'y'}: " + esc("; ".join(rec[:5]))
-                     + (" …" if len(rec) > 5 else "") + "</p>")
+    for lines, what in ((rec, ("recovery", "recoveries")),
+                        (summary.get("departures", []), ("departure followed", "departures followed"))):
+        if lines:
+            parts.append(f"<p>{len(lines)} {what[len(lines) != 1]}: " + esc("; ".join(lines[:5]))
+                         + (" …" if len(lines) > 5 else "") + "</p>")
     if warn:
         parts.append("<p>Warnings:</p><ul class='warnings'>" + "".join(f"<li>{esc(w)}</li>" for w in warn) + "</ul>")
     parts.append("</section>")

@@ -105,6 +105,7 @@ def score(est, log, clean_rms: float | None, case: Case) -> dict:
         "scale_sigma": [c["sigma"] for c in est.calibration.values()],
         "status": status_of(est)[0],
         "recoveries": len(est.recoveries),
+        "departures": len(est.departures),
         "rejected": dict(est.rejected),
     }
     if case.name == "stall":

@@ -137,7 +137,7 @@ def summaries_of(cmp: Comparison, directory: Path) -> dict[str, dict]:
         status, why = status_of(est)
         out[label] = {"calibration": est.calibration, "status": status, "status_reasons": why,
                       "rejected": est.rejected, "used": est.used, "recoveries": est.recoveries,
-                      "warnings": list(est.warnings)}
+                      "departures": est.departures, "warnings": list(est.warnings)}
     return out
 
 

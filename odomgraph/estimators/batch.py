@@ -33,7 +33,7 @@ from odomgraph.estimators.keyframes import build_keyframes
 from odomgraph.estimators.measurements import clean, from_log, slip_intensity, yaw_rate_sensed
 from odomgraph.observability import decondition
 from odomgraph.estimators.slipcheck import in_stretches, in_window
-from odomgraph.result import Estimate, is_departure
+from odomgraph.result import Estimate
 from odomgraph.estimators.schedule import Schedule
 from odomgraph.io.log import Log
 
@@ -658,9 +658,9 @@ def run_batch(log: Log, schedule: Schedule = Schedule(), options: SmootherOption
         prob.kf.gps_sigma[on] = HELD_SIGMA
         if on.any():
             held, held_out = {"gps": int(on.sum())}, {"gps": prob.kf.gps_t[on].copy()}
-    if initial is not None and not all(is_departure(r) for r in initial.recoveries):
+    if initial is not None and initial.recoveries:
         # The filter went through a rough patch: do not start there. A
-        # departure is not one (the filter followed a stall); counted as one,
+        # departure (Estimate.departures) is not one: the filter followed a stall; counted as one,
         # the fixes after a 17 s silence sent batch to a growing-window start
         # that left 2 % of its rows after the silence inside 3 sigma.
         initial = None

@@ -38,7 +38,7 @@ from odomgraph.estimators.measurements import (PAUSE_PATH_SHARE, PAUSE_S, PAUSE_
                                                 slip_intensity)
 from odomgraph.observability import decondition, held_pins
 from odomgraph.estimators.slipcheck import in_stretches, in_window
-from odomgraph.result import DEPARTURE_SAYS, Estimate, Innovations, is_departure
+from odomgraph.result import DEPARTURE_SAYS, Estimate, Innovations
 from odomgraph.estimators.schedule import Hold, Schedule
 from odomgraph.io.log import Log
 
@@ -320,7 +320,7 @@ def departure_widening(y: np.ndarray, y_prev: np.ndarray, dt: float,
 
 
 def departure_note(t: float, code: int, floor: float, last: float, slips: bool = True) -> str | None:
-    """The recovery line of a departure at t [s] (v, and the slips if
+    """The line of a departure at t [s] (Estimate.departures) (v, and the slips if
     ``slips``, floored at ``floor`` [(m/s)^2]), or None within 2 s of the
     one before (at ``last`` [s], -inf for none): one line per episode."""
     if t - last <= 2.0:
@@ -414,6 +414,7 @@ class EKF:
         state.setdefault("anchored", None)
         state.setdefault("_prev", {})     # nor the departures' watch
         state.setdefault("last_departure", -np.inf)
+        state.setdefault("departures", [])    # (older checkpoints kept them among the recoveries)
         self.__dict__.update(state)
         if "_rates" not in state:            # nor the rate noise kept whole
             self._rates = rate_noise(self._q, self._q_slip)
@@ -629,6 +630,7 @@ class EKF:
         self.held_t: dict[str, list] = {}     # sensor -> times of the measurements held out as a jump
         self._rearm: set[tuple] = set()       # sensors whose hold expired: no new jump until one is accepted
         self.recoveries: list[str] = []
+        self.departures: list[str] = []       # (Estimate.departures: not recoveries)
         self._prev: dict[tuple, list] = {}    # (sensor, beacon) -> its last two measurements (_gated)
         self.last_departure = -np.inf         # time [s] the rate states were last widened (_departure)
         self.pauses, self.pause_travel = [], []
@@ -878,7 +880,7 @@ class EKF:
         self.P[idx, idx] += np.maximum(floor - np.diagonal(self.P)[idx], 0.0)
         note = departure_note(t, code, float(floor), self.last_departure, self.options.slip_states)
         if note:
-            self.recoveries.append(note)
+            self.departures.append(note)
         self.last_departure = t
 
     def _watch(self, t: float, code: int, nis_k: float) -> None:
@@ -890,7 +892,7 @@ class EKF:
         if self._n_seen[code] > 100 and ema > opt.max_mean_nis * DOF[code]:
             what = (f"the running mean NIS of {SENSOR_NAMES[code]} is {ema:.0f} (expected {DOF[code]})")
             widen = watch_widening(code, np.atleast_1d(self.last_y))
-            if widen is None or sum(not is_departure(r) for r in self.recoveries) >= MAX_RECOVERIES:
+            if widen is None or len(self.recoveries) >= MAX_RECOVERIES:
                 raise EstimatorDivergedError(f"EKF diverged at t={t:.3f} s: {what}; the model no longer "
                                              "explains the data")
             # Recover instead of stopping: open up the states that explain
@@ -908,6 +910,7 @@ class EKF:
                             list(m.notes) + [self.init.note], wall, self.n_up, self.t_switch, self.switch_sigma,
                             sch.hold, self.P[SCALE_IDX, SCALE_IDX].copy(), self.init)
         est.recoveries = list(self.recoveries)
+        est.departures = list(self.departures)
         est.held_out = {k: np.asarray(v) for k, v in self.held_t.items()}
         est.warnings += self.window_warnings + self.heading_warnings()
         est.notes += self.pause_notes() + ([self.anchored] if self.anchored else [])

@@ -31,7 +31,7 @@ from odomgraph.estimators.initial import initial_state
 from odomgraph.estimators.measurements import from_log, slip_intensity
 from odomgraph.observability import decondition, held_pins
 from odomgraph.estimators.slipcheck import in_stretches, in_window
-from odomgraph.result import Estimate, is_departure
+from odomgraph.result import Estimate
 from odomgraph.estimators.schedule import Hold, Schedule
 from odomgraph.io.log import Log
 
@@ -152,6 +152,7 @@ def run_ekf_many(logs: list[Log], schedule: Schedule = Schedule(), options: EKFO
     run = {}                                     # gated sensor -> (N, reacquire_after, m) innovations of the runs
     run_len = {c: np.zeros(n, int) for c in GATED}
     recoveries: list[list[str]] = [[] for _ in range(n)]
+    departures: list[list[str]] = [[] for _ in range(n)]
     last_y = None
 
     hist: dict[tuple, list] = {}                 # (sensor, beacon) -> list of (N, m) innovations, newest last
@@ -304,7 +305,7 @@ def run_ekf_many(logs: list[Log], schedule: Schedule = Schedule(), options: EKFO
                         P[j, idx, idx] += np.maximum(floor - np.diagonal(P[j])[idx], 0.0)
                         note = departure_note(t, code, float(floor), float(last_departure[j]), opt.slip_states)
                         if note:
-                            recoveries[j].append(note)
+                            departures[j].append(note)
                         last_departure[j] = t
                 l2.append((t, last_y.copy(), np.abs(nis)))
                 if len(l2) > 2:
@@ -346,7 +347,7 @@ def run_ekf_many(logs: list[Log], schedule: Schedule = Schedule(), options: EKFO
             for j in np.nonzero(lost & ~dead)[0]:
                 what = f"the running mean NIS of {SENSOR_NAMES[code]} is {nis_ema[j, code]:.0f} (expected {DOF[code]})"
                 widen = watch_widening(code, np.atleast_1d(last_y[j]))
-                if widen is None or sum(not is_departure(r) for r in recoveries[j]) >= MAX_RECOVERIES:
+                if widen is None or len(recoveries[j]) >= MAX_RECOVERIES:
                     kill(j, f"EKF diverged at t={t:.3f} s: {what}; the model no longer explains the data")
                     continue
                 blk, add = widen                                   # as EKF.run
@@ -373,7 +374,7 @@ def run_ekf_many(logs: list[Log], schedule: Schedule = Schedule(), options: EKFO
                             out_pose[:, j], nis_j, list(meas[j].notes) + [inits[j].note], wall, n_up,
                             t_switch, None if switch_sigma is None else switch_sigma[j], sch.hold,
                             P[j, SCALE_IDX, SCALE_IDX].copy(), inits[j])
-        est.recoveries = recoveries[j]
+        est.recoveries, est.departures = recoveries[j], departures[j]
         est.held_out = {k: np.asarray(v) for k, v in held_t[j].items()}
         for key, v in meas[j].spikes.items():
             est.rejected[key] = est.rejected.get(key, 0) + v
