@@ -37,7 +37,6 @@ def main(argv=None):
     dest = RESULTS / "montecarlo"
     work = dest / "work"
     if not args.resume:
-        import shutil
         shutil.rmtree(work, ignore_errors=True)
     out, rows, frows = {}, [], []
     t_all = time.perf_counter()

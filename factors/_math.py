@@ -59,6 +59,18 @@ def dsinc(x):
     return np.where(small, -x / 3.0 + x**3 / 30.0, (xs * np.cos(xs) - np.sin(xs)) / (xs * xs))
 
 
+#: A Gaussian's sigma per median absolute deviation (1 / Phi^-1(3/4)).
+MAD_SIGMA = 1.4826
+
+
+def robust_sigma(x) -> float:
+    """The sigma of zero-mean Gaussian samples ``x`` (any shape, any unit),
+    from their median absolute value: MAD_SIGMA median |x|, unmoved by up to
+    half of them being outliers. Centre ``x`` first (``x - median(x)``) for
+    the usual MAD about the median."""
+    return float(MAD_SIGMA * np.median(np.abs(x)))
+
+
 def shape_of(*args) -> tuple:
     """The broadcast shape of the arguments; () for scalars, cheaply."""
     for a in args:

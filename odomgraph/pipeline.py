@@ -487,9 +487,10 @@ def _row_scale_line(sensor: str, log: Log, f: float) -> str:
     from odomgraph.analysis.noise import ROW_FACTOR_CAP
     a, b = log.robot.encoder_sigma
     if log.encoders is not None:
+        fits = f"{'at least ' if f >= ROW_FACTOR_CAP else ''}{f:.2g}x"
         return (f"encoders: consecutive rows' speeds scatter more than robot.toml's [encoders] sigma "
                 f"({a / f:.3g} m/s + {b / f:.3g} |v|) and the ticks' quantisation say: the wheels' noise fits "
-                f"{'at least ' if f >= ROW_FACTOR_CAP else ''}{f:.2g}x that sigma, and it was widened to ({a:.3g}, {b:.3g}) for this run (calibrate writes "
+                f"{fits} that sigma, and it was widened to ({a:.3g}, {b:.3g}) for this run (calibrate writes "
                 "it back)")
     return (f"wheel_speeds: consecutive rows scatter {f:.2g}x more than robot.toml's [encoders] sigma "
             f"({a / f:.3g} m/s + {b / f:.3g} |v|) says (speeds differenced from quantised wheel positions carry "

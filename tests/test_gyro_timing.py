@@ -5,7 +5,6 @@ scale 4 sigma off, status ok, and a gyro stamped 0.25 s late taken for a GPS
 clock jump. Only the GPS was timed before. Scenarios, seeds, offsets and
 jump times here are other than the probe's (paper seed 164, +0.5 s at 40 s;
 +0.25 s throughout)."""
-import numpy as np
 import pytest
 
 from odomgraph.analysis.gyrotiming import window_offsets

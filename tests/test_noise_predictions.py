@@ -15,8 +15,6 @@ Logs here: other scenarios, seeds and rates than the probe's (the yard at
 """
 from __future__ import annotations
 
-import tomllib
-
 import numpy as np
 import pytest
 

@@ -17,6 +17,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from odomgraph.factors._math import robust_sigma
+
 #: Turning this fast [rad/s] (standard deviation of the wheels' yaw rate) is
 #: needed before the gyro can be judged against the wheels.
 MIN_TURN = 0.05
@@ -116,7 +118,7 @@ def _noise_sd(x: np.ndarray) -> float:
     differences (a robust MAD; the signal's own changes between half-second
     bins are small against it)."""
     d = np.diff(x)
-    return float(1.4826 * np.median(np.abs(d - np.median(d))) / np.sqrt(2.0))
+    return robust_sigma(d - np.median(d)) / np.sqrt(2.0)
 
 
 def _bin_means(t: np.ndarray, x: np.ndarray, width: float) -> np.ndarray:

@@ -36,6 +36,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from odomgraph.factors._math import robust_sigma
+
 #: Medians of chi-square with 1 and 2 degrees of freedom.
 CHI2_MEDIAN = {1: 0.4549, 2: 1.3863}
 #: A scale this far above 1 is acted on (and reported).
@@ -72,7 +74,7 @@ def noise_scales(est, log) -> dict[str, float]:
             continue
         u = _whitened_residuals(est, log, sensor)
         if u is not None and u.size >= MIN_COUNT:
-            out[sensor] = float(1.4826 * np.median(np.abs(u)))
+            out[sensor] = robust_sigma(u)
     return out
 
 
@@ -309,7 +311,7 @@ def _row_scale(clean, a: float, b: float) -> float | None:
     if d2.size < MIN_COUNT:
         return None
     if (clean.encoders is not None and np.median(s / (s + q)) < ENCODER_EQ41_SHARE
-            and _mad(d2 / np.sqrt(q)) < ENCODER_OVER_QUANTISATION):
+            and robust_sigma(d2 / np.sqrt(q)) < ENCODER_OVER_QUANTISATION):
         # The ticks' quantisation is most of the rows' noise: its pattern at a
         # steady speed (counts alternating 1, 2, 1, 2) is not the uniform error
         # the variance assumes, and its lattice fools the MAD; solving eq. 41's
@@ -322,7 +324,7 @@ def _row_scale(clean, a: float, b: float) -> float | None:
     ad = np.abs(d2)
 
     def scatter(g: float) -> float:
-        return _mad(ad / np.sqrt(g * g * s + q))
+        return robust_sigma(ad / np.sqrt(g * g * s + q))
     plain = scatter(1.0)
     if plain <= ENCODER_SCATTER_ABOVE or not np.any(q > 0) or not np.any(s > 0):
         return plain     # no quantisation: plain is the factor itself (scatter(g) = plain / g)
@@ -375,7 +377,7 @@ def gyro_row_scale(log) -> float | None:
     d2 = d2[np.isfinite(d2)]
     if d2.size < MIN_COUNT:
         return None
-    return float(_mad(d2) / (np.sqrt(6.0) * log.robot.gyro_sigma))
+    return float(robust_sigma(d2) / (np.sqrt(6.0) * log.robot.gyro_sigma))
 
 
 def _gap_free(dt: np.ndarray, span: int) -> np.ndarray:
@@ -384,11 +386,6 @@ def _gap_free(dt: np.ndarray, span: int) -> np.ndarray:
     difference across a gap mixes two stretches of motion."""
     ok = dt <= WHEEL_MAX_GAP * float(np.median(dt))
     return np.all([ok[i:ok.size - span + 1 + i] for i in range(span)], axis=0)
-
-
-def _mad(x: np.ndarray) -> float:
-    """The robust scale of ``x`` about 0 (1.4826 median |x|: a Gaussian's sigma)."""
-    return float(1.4826 * np.median(np.abs(x)))
 
 
 def row_scales(log) -> dict[str, float]:
@@ -464,7 +461,7 @@ def correlation_factors(est, log) -> dict[str, tuple[float, float]]:
         u = np.concatenate([c[np.isfinite(c)] for _, c in chans])
         if u.size < MIN_COUNT:
             continue
-        cap = 4.0 * max(1.4826 * float(np.median(np.abs(u))), 1e-12)
+        cap = 4.0 * max(robust_sigma(u), 1e-12)
         num = den = 0.0
         n = 0
         for t, c in chans:
@@ -581,10 +578,10 @@ def gps_sigma_floor(est, log) -> tuple[float, float] | None:
         if sel.sum() < MIN_COUNT:
             continue
         x = r[sel].ravel()
-        s = 1.4826 * float(np.median(np.abs(x - np.median(x))))
+        s = robust_sigma(x - np.median(x))
         x = x[np.abs(x - np.median(x)) <= 4.0 * max(s, 1e-12)]
         claim.append(float(np.median(sig[sel])))
-        scatter.append(1.4826 * float(np.median(np.abs(x - np.median(x)))))
+        scatter.append(robust_sigma(x - np.median(x)))
     if len(claim) < 2:
         return None
     claim, scatter = np.array(claim), np.array(scatter)

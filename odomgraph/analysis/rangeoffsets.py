@@ -22,6 +22,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from odomgraph.factors._math import robust_sigma
+
 #: A beacon's mean residual is an offset beyond this many of its sigmas...
 OFFSET_Z = 5.0
 #: ...and this share of the configured range sigma (a fast anchor makes a millimetre significant).
@@ -65,7 +67,7 @@ def range_offsets(est, log) -> list[Offset]:
         if x.size < MIN_COUNT:
             continue
         med = float(np.median(x))
-        s = 1.4826 * float(np.median(np.abs(x - med)))
+        s = robust_sigma(x - med)
         x = x[np.abs(x - med) <= OUTLIER * max(s, 1e-12)]
         if x.size < MIN_COUNT:
             continue

@@ -18,6 +18,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from odomgraph import state as S
+from odomgraph.factors._math import robust_sigma
 
 #: An offset is reported when it is this many sigmas from 0, and at least MIN_OFFSET.
 N_SIGMA = 5.0
@@ -392,7 +393,7 @@ def combine(parts: list[Offset]) -> Offset | None:
     d = np.array([p.delta for p in parts])
     if len(d) >= 4:
         med = np.median(d)
-        mad = 1.4826 * np.median(np.abs(d - med))
+        mad = robust_sigma(d - med)
         keep = np.abs(d - med) <= max(4.0 * mad, 0.02)
         parts = [p for p, k in zip(parts, keep) if k]
         d = d[keep]

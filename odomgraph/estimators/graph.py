@@ -431,7 +431,7 @@ def linearize(prob: Problem, pose: np.ndarray, W: np.ndarray, k0: int = 0, k1: i
     robust random-walk rows weighted by their loss's curvature, for the
     covariance (walk_rows).
     """
-    kf, r, pn = prob.kf, prob.robot, prob.robot.process
+    kf, r = prob.kf, prob.robot
     k1 = kf.n - 1 if k1 is None else k1
     n1 = k1 - k0
     x, y, th = pose[k0:k1, 0], pose[k0:k1, 1], pose[k0:k1, 2]

@@ -20,7 +20,7 @@ from dataclasses import fields, replace
 import numpy as np
 
 from odomgraph.estimators.batch import zero_slip_intervals
-from odomgraph.estimators.graph import Problem, RandomWalkSteps, motion_sigma, unary_rows, walk_span
+from odomgraph.estimators.graph import Problem, motion_sigma, unary_rows, walk_span
 from odomgraph.estimators.keyframes import Keyframes, build_keyframes
 from odomgraph.estimators.measurements import clean
 from odomgraph.io.log import Log

@@ -11,6 +11,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from odomgraph.factors._math import MAD_SIGMA
 from odomgraph.factors.encoder import speed_sigma
 from odomgraph.io.log import Log
 
@@ -229,7 +230,7 @@ def _hampel(t, x, accel, floor, half: int = 3):
     win = sliding_window_view(pad, 2 * half + 1)
     nb = np.delete(win, half, axis=1)                                  # neighbours only
     med = np.median(nb, 1)
-    mad = 1.4826 * np.median(np.abs(nb - med[:, None]), 1)
+    mad = MAD_SIGMA * np.median(np.abs(nb - med[:, None]), 1)          # (factors._math.robust_sigma per row)
     # how far the signal can move between this sample and its nearest neighbours
     gap = np.maximum(np.diff(t, prepend=t[0]), np.diff(t, append=t[-1]))
     thr = np.maximum(np.maximum(SPIKE_MADS * mad, accel * 2.0 * gap), floor)

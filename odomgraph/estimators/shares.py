@@ -121,7 +121,6 @@ class Shares:
     def gyro_turn(self, t0, t1, ts, fallback) -> np.ndarray:
         if self.gyro is None:
             return np.broadcast_to(np.asarray(fallback, float), np.shape(ts)).copy()
-        gt = self.gyro.t
         # The integral's white noise over [t0, t1] from the n samples inside
         # it: sigma dt / sqrt(n) [rad]. From those samples only: a period
         # from the log's extent differed between a stream's windows and the

@@ -21,6 +21,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from odomgraph.factors._math import robust_sigma
+
 
 #: Length of the comparisons [s], and the half-width over which fixes are averaged first.
 STEP = 1.0
@@ -145,7 +147,7 @@ def _scale_free(g: np.ndarray, om: np.ndarray, v: np.ndarray) -> np.ndarray | No
     res = res - np.median(res)
     X = np.stack([om, v, np.ones_like(om)], -1)
     for _ in range(4):
-        mad = 1.4826 * float(np.median(np.abs(res)))
+        mad = robust_sigma(res)
         keep = np.abs(res) < max(3.0 * mad, 0.02)
         if keep.sum() < 5:
             break

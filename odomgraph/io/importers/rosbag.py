@@ -43,7 +43,7 @@ from pathlib import Path
 import numpy as np
 
 from odomgraph.errors import LogFormatError
-from odomgraph.factors._math import wrap_angle
+from odomgraph.factors._math import robust_sigma, wrap_angle
 from odomgraph.io.csvtable import ORIGIN_ABOVE
 from odomgraph.io.geodesy import latlon_to_local
 from odomgraph.io.log import Encoders, Gps, Gyro, Log, WheelSpeeds
@@ -1037,7 +1037,7 @@ class _PoseTrack:
         if self.t.size < 4:
             return 0.0
         d2 = [np.diff(c, 2) for c in (self.x, self.y, 0.5 * self.track * self.yaw)]
-        return float(1.4826 * np.median(np.sqrt(d2[0] ** 2 + d2[1] ** 2 + d2[2] ** 2)) / np.sqrt(6.0))
+        return robust_sigma(np.sqrt(d2[0] ** 2 + d2[1] ** 2 + d2[2] ** 2)) / np.sqrt(6.0)
 
     def _has_jump(self, idx: np.ndarray) -> np.ndarray:
         """(len(idx) - 1,) True where the intervals between updates idx[i]
