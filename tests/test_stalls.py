@@ -132,6 +132,12 @@ def test_stalls_again_and_again_are_not_a_lost_filter():
     assert all(DEPARTURE_SAYS in r for r in est.departures), est.departures
     status, why = status_of(est)
     assert status == "recovered" and why[-1] == f"{len(est.departures)} departure(s) followed", why
+    from odomgraph.pipeline import summary, warnings_of
+    s = summary(est, log, Schedule(20.0))
+    assert s["departures"] == est.departures and s["recoveries"] == est.recoveries
+    assert s["status"] == "recovered"
+    said = [w for w in warnings_of(est, log) if " followed a departure at " in w]
+    assert said == [f"ekf followed a departure at {d}" for d in est.departures]
 
 
 BATCH_CASES = {   # logs the smoother's Huber slip steps were not designed on (graph.SLIP_STEP_K)
@@ -200,3 +206,26 @@ def test_without_a_gyro_batch_keeps_gaussian_slip_steps(seed):
     assert math.isinf(build_problem(log, Schedule(30.0), SmootherOptions()).slip_step_k)
     est = estimate(log, "batch", Schedule(30.0))
     assert status_of(est)[0] == "degraded", status_of(est)
+
+
+def test_a_live_stream_says_each_departure_as_it_happens():
+    """`odomgraph stream` writes each departure the live EKF follows to
+    stderr as it happens, as a departure, not a recovery, and its summary
+    lists them: the same lines as the replayed filter's Estimate.departures."""
+    import io
+
+    from odomgraph.io.stream import log_lines
+    from odomgraph.livestream import run_stream
+    from odomgraph.online import Online
+    log = stalled(*CASES["yard-gps"])
+    ref = run_ekf(log, Schedule(20.0))
+    assert ref.departures
+    live = Online(log.robot, "ekf", Schedule(20.0))
+    out, err = io.StringIO(), io.StringIO()
+    run_stream(live, log_lines(log), out, err)
+    lines = err.getvalue().splitlines()
+    said = [ln.removeprefix("odomgraph: followed a departure: ") for ln in lines
+            if ln.startswith("odomgraph: followed a departure: ")]
+    assert said == ref.departures, (said, ref.departures)
+    assert not any(DEPARTURE_SAYS in ln for ln in lines if "recovered" in ln), lines
+    assert live.summary()["departures"] == ref.departures
