@@ -331,10 +331,12 @@ def _estimate_checked(log: Log, method: Method, schedule: Schedule, progress, op
     from odomgraph.analysis.mounting import dead_encoder_warnings
     from odomgraph.analysis.pathscale import path_scale_warnings
     from odomgraph.observability import few_beacons_warnings
-    from odomgraph.analysis.plausible import reversed_motion_warnings, skid_warnings
+    from odomgraph.analysis.plausible import reversed_motion_warnings, skid_warnings, window_transfer_warnings
+    skid = skid_warnings(est, log.robot.track_width) if _has_reference(log) else []
+    # (a skid found says the same of the window, louder: one line is enough)
+    transfer = window_transfer_warnings(est, log.robot.track_width) if _has_reference(log) and not skid else []
     suspect = (_prior_warnings(est, log) + mounting_warnings(log) + dead_encoder_warnings(log)
-               + reversed_motion_warnings(est, log.robot.track_width)
-               + (skid_warnings(est, log.robot.track_width) if _has_reference(log) else [])
+               + reversed_motion_warnings(est, log.robot.track_width) + skid + transfer
                + path_scale_warnings(est, log)
                + few_beacons_warnings(log, est.warnings))
     if log.gps is not None and not est.time_offsets:

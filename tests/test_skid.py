@@ -47,8 +47,9 @@ def test_a_slip_through_the_window_is_right_or_flagged(case, method):
         assert status == "degraded", (z, est.warnings)
         said = [w for w in est.warnings if f"the {slip.wheel} wheel turns" in w and "slower than the ground" in w]
         assert said, est.warnings
-        t0 = float(said[0].split("from t=")[1].split(" ")[0])
-        assert t0 >= slip.end - 1.0            # the skid is after the slip ends, where the wheel grips again
+        if "from t=" in said[0]:               # (window_transfer_warnings says no time: all after the window)
+            t0 = float(said[0].split("from t=")[1].split(" ")[0])
+            assert t0 >= slip.end - 1.0        # the skid is after the slip ends, where the wheel grips again
 
 
 @pytest.mark.parametrize("make,seed", [(paper, 43), pytest.param(yard, 44, marks=pytest.mark.slow)])
@@ -140,3 +141,66 @@ def test_an_estimate_shorter_than_a_second_is_read():
     mean[:, 3] = 1.0
     est = SimpleNamespace(t=t, mean=mean, sigma=np.full((t.size, 11), 0.01), method="m")
     assert skid_warnings(est, 0.5) == []
+
+
+#: A small slip of one wheel for part of the calibration window, then grip
+#: (window_transfer_warnings): a probe's logs (1.5-5 cm/s, seeds 26-81, a
+#: 0.6 m track, GPS at 5-10 Hz) ended 4-24 sigma off, status ok. These have
+#: other scenarios, wheels, slips, spans and seeds.
+SMALL = {
+    "yard, left 0.04 m/s from 4 to 17 s, seed 61": (yard, SlipEvent("left", 4.0, 17.0, 0.04), 70.0, 61),
+    "paper, right 0.05 m/s from 2 to 15 s, seed 62": (paper, SlipEvent("right", 2.0, 15.0, 0.05), 75.0, 62),
+    "paper, left 0.03 m/s from 6 to 19 s, seed 63": (paper, SlipEvent("left", 6.0, 19.0, 0.03), 80.0, 63),
+}
+
+
+#: Not caught yet (README Known limitations): batch leaves the slip's share
+#: in its scale factor (z 7.6) without the slip after the window showing it.
+OPEN_SMALL = {("paper, left 0.03 m/s from 6 to 19 s, seed 63", "batch")}
+
+
+@pytest.mark.parametrize("case,method", [
+    pytest.param(c, m, marks=pytest.mark.xfail(reason="open: batch's small slip in the window", strict=False))
+    if (c, m) in OPEN_SMALL else (c, m) for c in SMALL for m in ("ekf", "batch")])
+def test_a_small_slip_in_the_window_is_right_or_flagged(case, method):
+    make, slip, duration, seed = SMALL[case]
+    sc = make(duration).with_(slips=(slip,))
+    log = inject(sc, Faults(), seed)
+    est = estimate(log, method, Schedule(20.0))
+    z = (est.mean[-1, SCALE] - np.array(sc.scales)) / est.sigma[-1, SCALE]
+    status, why = status_of(est)
+    if np.abs(z).max() > 3.0:
+        assert status == "degraded", (z, est.warnings)
+        assert any(f"the {slip.wheel} wheel turns" in w for w in est.flags), (z, est.flags)
+
+
+def test_the_window_transfer_check_reads_a_steady_share_beyond_sigma():
+    """Unit check on a synthetic estimate (reversing at 1 m/s, window until
+    20 s): a wheel whose slip stays -3 % of its ground speed after the
+    window, with a 0.3 % scale sigma, is said with its share; within
+    TRANSFER_SIGMA sigmas, below TRANSFER_REL, on one side in fewer than
+    TRANSFER_SIGN of its rows (slip events), or with no window, it is not."""
+    from types import SimpleNamespace
+
+    from odomgraph.analysis.plausible import window_transfer_warnings
+    t = np.arange(0.0, 60.0, 0.05)
+    mean = np.zeros((t.size, 11))
+    mean[:, 8:11] = 1.0
+    mean[:, 3] = -1.0
+    sigma = np.full((t.size, 11), 0.003)
+    mean[t > 20.0, 6] = 0.03                  # left surface -0.97 m/s: 3 % slower than the ground
+    est = SimpleNamespace(t=t, mean=mean, sigma=sigma, method="m", t_switch=20.0)
+    out = window_transfer_warnings(est, 0.5)
+    assert len(out) == 1 and "the left wheel turns 3.0 % slower than the ground under it passes in 100 % of " \
+        "38 s of driving, where its scale factor's sigma is 0.30 %" in out[0], out
+    sigma[:, 8] = 0.01                        # 3 sigma
+    assert window_transfer_warnings(est, 0.5) == []
+    sigma[:, 8] = 0.0005
+    mean[t > 20.0, 6] = 0.004                 # 0.4 %: below TRANSFER_REL
+    assert window_transfer_warnings(est, 0.5) == []
+    mean[t > 20.0, 6] = np.where(np.sin(t[t > 20.0]) > -0.1, 0.03, -0.03)    # one side in ~53 %
+    assert window_transfer_warnings(est, 0.5) == []
+    mean[t > 20.0, 6] = -0.03                 # faster than the ground, steadily: said too
+    assert "3.0 % faster" in window_transfer_warnings(est, 0.5)[0]
+    est.t_switch = None
+    assert window_transfer_warnings(est, 0.5) == []

@@ -262,6 +262,12 @@ def _fix_grid(log, step: float):
     return grid, np.interp(grid, g.t, g.x), np.interp(grid, g.t, g.y), t_dr, dr, sig, covered
 
 
+#: fix_speed_correlation leaves out steps whose fix and wheel speeds differ
+#: beyond this many robust sigmas of the rest, if they are at most this share.
+OUTLIER_MADS = 8.0
+OUTLIER_SHARE = 0.1
+
+
 def fix_speed_correlation(log, step: float = 2.0, max_lag: float | None = None):
     """(correlation between the fixes' speed and the wheels' speed (nominal)
     over ``step``-second steps, the lag [s] of the fixes that correlates
@@ -285,12 +291,28 @@ def fix_speed_correlation(log, step: float = 2.0, max_lag: float | None = None):
         px, py = np.interp(grid - lag, t_dr, ax), np.interp(grid - lag, t_dr, ay)
         return (np.hypot(np.diff(px), np.diff(py)) / step)[covered]
     w0 = wheel_speed(0.0)
-    if fix_speed.size < 10 or np.std(fix_speed) < 4.0 * sig / step or np.std(w0) == 0:
+    # A wild fix (a probe's first fix 5-17 m off) makes the steps either side
+    # of it disagree with the wheels by far more than the rest do; at a
+    # near-constant speed those one or two steps decide the correlation
+    # alone, and read as "one encoder counts backwards" they refused good
+    # logs. They are left out (beyond OUTLIER_MADS robust sigmas of the
+    # steps' disagreement), but only a few (OUTLIER_SHARE): a backwards
+    # encoder or a late clock makes most steps disagree, and is kept whole.
+    r = fix_speed - w0
+    dev = np.abs(r - np.median(r))
+    sane = dev <= max(OUTLIER_MADS * robust_sigma(r - np.median(r)), 4.0 * sig / step)
+    if np.mean(~sane) > OUTLIER_SHARE:
+        sane[:] = True
+    fix_speed = fix_speed[sane]
+    if fix_speed.size < 10 or np.std(fix_speed) < 4.0 * sig / step or np.std(w0[sane]) == 0:
         return None
-    corr = {lag: float(np.corrcoef(fix_speed, wheel_speed(lag))[0, 1])
-            for lag in np.arange(-max_lag, max_lag + 1e-9, 0.5) if np.std(wheel_speed(lag)) > 0}
+
+    def corr_at(lag):
+        w = wheel_speed(lag)[sane]
+        return float(np.corrcoef(fix_speed, w)[0, 1]) if np.std(w) > 0 else None
+    corr = {lag: c for lag in np.arange(-max_lag, max_lag + 1e-9, 0.5) if (c := corr_at(lag)) is not None}
     best = max(corr, key=corr.get)
-    return corr.get(0.0, float(np.corrcoef(fix_speed, w0)[0, 1])), float(best), corr[best]
+    return corr.get(0.0, float(np.corrcoef(fix_speed, w0[sane])[0, 1])), float(best), corr[best]
 
 
 def fix_turn_correlation(log, step: float | None = None) -> float | None:
