@@ -453,7 +453,7 @@ def estimate(
         metavar="LOG...", help="Log directory (LOG_FORMAT.md); several, or a directory of logs, run as a fleet.")],
     output: Annotated[Path, typer.Option("--output", "-o", help="Estimate directory to write (a fleet: one "
                                                                  "per log inside it, and fleet.csv).")],
-    method: Annotated[MethodName, typer.Option(help="Estimator.")] = MethodName.ekf,
+    method: Annotated[MethodName, typer.Option("--method", "-m", help="Estimator.")] = MethodName.ekf,
     calibrate_until: Annotated[str, typer.Option(
         help="Seconds from the log start (the wheels' first row when the other sensors ran before them) to "
              "estimate scale factors with slip forced to 0; "
@@ -674,7 +674,8 @@ def calibrate(
     output: Annotated[Path, typer.Option("--output", "-o", help="robot.toml to write (a fleet: a directory, "
                                                                  "with NAME.toml per log and fleet.csv).")]
     = Path("robot-calibrated.toml"),
-    method: Annotated[MethodName, typer.Option(help="Estimator (a smoother; ekf works too).")] = MethodName.batch,
+    method: Annotated[MethodName, typer.Option("--method", "-m", help="Estimator (a smoother; ekf works too).")] = \
+        MethodName.batch,
     calibrate_until: Annotated[str, typer.Option(
         help="'none' (default): slip and scale together with a sparse slip prior; or seconds of "
              "slip-free driving at the start.")] = "none",
@@ -750,6 +751,7 @@ def stream(
     robot: Annotated[Optional[Path], typer.Option(
         help="robot.toml of the robot (default: the replayed log's).")] = None,
     method: Annotated[MethodName, typer.Option(
+        "--method", "-m",
         help="Estimator: ekf (a row per encoder row), isam2 (its causal row per keyframe, as online.csv), "
              "fixed-lag (a row per keyframe as it leaves the lag window).")] = MethodName.ekf,
     calibrate_until: Annotated[str, typer.Option(

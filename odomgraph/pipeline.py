@@ -38,6 +38,7 @@ def estimate(log: Log, method: Method = Method.ekf, schedule: Schedule = Schedul
     options = {k: v for k, v in options.items() if v is not None}
     from odomgraph.io.log import rebased
     log = rebased(log)  # a real clock's stamps, counted from a whole second (Log.t_origin)
+    _refuse_units(log)
     def run(sch: Schedule, prog, lg: Log = log) -> Estimate:
         if time_offset:
             return _with_time_offset(lg, method, sch, prog, {**options, "fit_noise": fit_noise})
@@ -51,6 +52,28 @@ def estimate(log: Log, method: Method = Method.ekf, schedule: Schedule = Schedul
         if e is not None:
             e.t_origin = log.t_origin
     return est
+
+
+def _absolute_times(log: Log) -> np.ndarray:
+    """Sorted times [s] of the log's absolute measurements (fixes on the
+    wheels' clock, ranges, body velocities)."""
+    from odomgraph.analysis.metrics import gps_times
+    ts = [gps_times(log)] if log.gps is not None else []
+    ts += [s.t for s in (log.ranges, log.velocity) if s is not None]
+    return np.sort(np.concatenate(ts)) if ts else np.zeros(0)
+
+
+def _refuse_units(log: Log) -> None:
+    """LogFormatError (one line, naming gyro.csv) for a gyro in degrees per
+    second: no estimate from it is worth writing, as none is from stamps in
+    milliseconds (io.log refuses those as it reads them)."""
+    from odomgraph.analysis.mounting import gyro_in_degrees
+    if log.gyro is None:
+        return
+    line = gyro_in_degrees(log)
+    if line:
+        from odomgraph.errors import LogFormatError
+        raise LogFormatError(log.path / "gyro.csv" if log.path is not None else "gyro.csv", line)
 
 
 def _with_outrun(est: Estimate, log: Log) -> Estimate:
@@ -334,7 +357,8 @@ def _estimate_checked(log: Log, method: Method, schedule: Schedule, progress, op
     from odomgraph.analysis.plausible import reversed_motion_warnings, skid_warnings, window_transfer_warnings
     skid = skid_warnings(est, log.robot.track_width) if _has_reference(log) else []
     # (a skid found says the same of the window, louder: one line is enough)
-    transfer = window_transfer_warnings(est, log.robot.track_width) if _has_reference(log) and not skid else []
+    transfer = (window_transfer_warnings(est, log.robot.track_width, _absolute_times(log))
+                if _has_reference(log) and not skid else [])
     suspect = (_prior_warnings(est, log) + mounting_warnings(log) + dead_encoder_warnings(log)
                + reversed_motion_warnings(est, log.robot.track_width) + skid + transfer
                + path_scale_warnings(est, log)
@@ -1304,6 +1328,7 @@ def calibrate_to_file(log: Log, out: Path, schedule: Schedule = Schedule(calibra
     inputs = (log.path,) if log.path else ()
     # (a file odomgraph did not write is refused now, not after the work: a probe waited 8 s for it)
     check_output_file(out, inputs, is_ours=_is_calibration_file)
+    _refuse_units(log)       # (a unit to fix, not a calibration to force)
     if not force:
         # A mounting mistake shows in the data before any fit: say it now.
         from odomgraph.analysis.mounting import mounting_warnings

@@ -169,9 +169,14 @@ def test_calibrate_cli_exits_1_in_one_line_and_writes_nothing(tmp_path):
     r = CliRunner().invoke(app, ["calibrate", str(d), "-o", str(out), "--calibrate-until", "20", "--no-tune"])
     assert r.exit_code == 1, r.output
     lines = [ln for ln in r.output.splitlines() if ln.startswith("odomgraph: error")]
-    # refused before any fit, with the cause and the way out
-    assert len(lines) == 1 and "degrees per second" in lines[0] and "--force" in lines[0], lines
+    # refused before any fit, naming the file and the unit (a unit to fix: --force is not offered)
+    assert len(lines) == 1 and f"{d / 'gyro.csv'}: the gyro reads" in lines[0] and "degrees per second" in lines[0] \
+        and "--force" not in lines[0], lines
     assert not out.exists()
+    r = CliRunner().invoke(app, ["estimate", str(d), "-o", str(tmp_path / "est"), "--method", "ekf"])
+    lines = [ln for ln in r.output.splitlines() if ln.startswith("odomgraph: error")]
+    assert r.exit_code == 1 and len(lines) == 1 and "gyro.csv: the gyro reads" in lines[0], r.output
+    assert not (tmp_path / "est").exists()
     # a mirrored GPS frame: the smoother finishes, the check refuses, --force is offered
     g = log.gps
     d2 = write_log(log.with_(gps=replace(g, x=g.y, y=g.x)), tmp_path / "log2")

@@ -96,6 +96,9 @@ def test_missing_log_dir(tmp_path):
 
 def test_bad_options(paper_log_dir, tmp_path):
     one_line_error(run("estimate", paper_log_dir, "--method", "ekf", "--calibrate-until", "none", "-o", tmp_path / "o"), "smoothers")
+    # -m is --method (two probes reached for it first): the same refusal, and a method it does not know named
+    one_line_error(run("estimate", paper_log_dir, "-m", "ekf", "--calibrate-until", "none", "-o", tmp_path / "o"), "smoothers")
+    one_line_error(run("calibrate", paper_log_dir, "-m", "bach", "-o", tmp_path / "c.toml"), "bach")
     one_line_error(run("estimate", paper_log_dir, "--calibrate-until", "soon", "-o", tmp_path / "o"), "soon")
     one_line_error(run("simulate", "--scales", "1,2", "-o", tmp_path / "s"), "--scales", "3 comma-separated")
     one_line_error(run("simulate", "--slip", "middle:1:2:3", "-o", tmp_path / "s"), "--slip")

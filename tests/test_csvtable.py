@@ -97,3 +97,19 @@ def test_a_copy_is_the_same_text_on_either_path(tmp_path):
     slow = C._read_rows(p, text, ("t", "x"), (), ())
     assert fast["_duplicates"] == slow["_duplicates"] == 1
     assert np.array_equal(fast["t"], slow["t"]) and np.array_equal(fast["_line"], slow["_line"])
+
+
+def test_a_sensor_file_with_a_header_and_no_rows_is_said(tmp_path):
+    """A gps.csv (or gyro.csv) holding only its header read as no sensor
+    without a word (a probe): the log now says so, one warning each."""
+    from odomgraph.io.log import read_log, write_log
+    from odomgraph.sim.scenarios import paper
+    from odomgraph.sim.simulate import simulate
+    d = write_log(simulate(paper(10.0), 5), tmp_path / "log")
+    for name in ("gps.csv", "gyro.csv"):
+        head = (d / name).read_text().splitlines()[0]
+        (d / name).write_text(head + "\n")
+    log = read_log(d)
+    assert [w for w in log.warnings if "a header and no rows" in w] == [
+        "gps.csv: a header and no rows: the log has no gps measurements",
+        "gyro.csv: a header and no rows: the log has no gyro measurements"]

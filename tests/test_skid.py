@@ -190,17 +190,32 @@ def test_the_window_transfer_check_reads_a_steady_share_beyond_sigma():
     sigma = np.full((t.size, 11), 0.003)
     mean[t > 20.0, 6] = 0.03                  # left surface -0.97 m/s: 3 % slower than the ground
     est = SimpleNamespace(t=t, mean=mean, sigma=sigma, method="m", t_switch=20.0)
-    out = window_transfer_warnings(est, 0.5)
+    seen = np.arange(0.0, 60.0, 0.5)          # fixes at 2 Hz throughout
+    out = window_transfer_warnings(est, 0.5, seen)
     assert len(out) == 1 and "the left wheel turns 3.0 % slower than the ground under it passes in 100 % of " \
         "38 s of driving, where its scale factor's sigma is 0.30 %" in out[0], out
     sigma[:, 8] = 0.01                        # 3 sigma
-    assert window_transfer_warnings(est, 0.5) == []
+    assert window_transfer_warnings(est, 0.5, seen) == []
     sigma[:, 8] = 0.0005
     mean[t > 20.0, 6] = 0.004                 # 0.4 %: below TRANSFER_REL
-    assert window_transfer_warnings(est, 0.5) == []
+    assert window_transfer_warnings(est, 0.5, seen) == []
     mean[t > 20.0, 6] = np.where(np.sin(t[t > 20.0]) > -0.1, 0.03, -0.03)    # one side in ~53 %
-    assert window_transfer_warnings(est, 0.5) == []
+    assert window_transfer_warnings(est, 0.5, seen) == []
     mean[t > 20.0, 6] = -0.03                 # faster than the ground, steadily: said too
-    assert "3.0 % faster" in window_transfer_warnings(est, 0.5)[0]
+    assert "3.0 % faster" in window_transfer_warnings(est, 0.5, seen)[0]
+    seen = seen[(seen < 25.0) | (seen > 52.0)]  # an outage from 25 to 52 s: 12 s of driving seen
+    assert len(window_transfer_warnings(est, 0.5, seen)) == 1
+    seen = seen[(seen < 25.0) | (seen > 54.0)]  # just under TRANSFER_MIN_S seen: too few
+    assert window_transfer_warnings(est, 0.5, seen) == []
     est.t_switch = None
-    assert window_transfer_warnings(est, 0.5) == []
+    assert window_transfer_warnings(est, 0.5, np.arange(0.0, 60.0, 0.5)) == []
+
+
+@pytest.mark.parametrize("make,seed", [(yard, 73), (paper, 72)])   # yard 73: said, before rows were judged so
+def test_slips_wandering_in_a_gps_outage_are_not_a_calibration_off(make, seed):
+    """In a GPS outage nothing holds the EKF's slips (a probe's 60 s outage
+    with a slip inside read 5 % at 27 sigma, its scale factors right): only
+    rows near an absolute measurement count, and no transfer line is said."""
+    log = inject(make(110.0), Faults(outages=(("gps", 30.0, 85.0),)), seed)
+    est = estimate(log, "ekf", Schedule(20.0))
+    assert not [w for w in est.warnings if "after the calibration window" in w], est.warnings

@@ -232,3 +232,34 @@ def test_the_trial_offsets_misfits_at_once_equal_one_at_a_time():
             np.testing.assert_allclose(T._trial_misfits(path, tf, p, w), one, rtol=1e-12, atol=0)
             n += 1
     assert n >= 15
+
+
+def test_the_nominal_path_is_not_asked_when_it_fits_fewer_windows(monkeypatch):
+    """Scale factors far from nominal (0.9, 1.1, 0.85: a probe's log with
+    exact stamps) draw the wheels' path twice: with the estimate's, five
+    windows fit at about 0 s; with nominal, one. That one window's +0.46 s
+    was said as a late GPS clock (status degraded, calibrate refused). The
+    path that fits more of the log is the one believed."""
+    from types import SimpleNamespace
+
+    from odomgraph.analysis import timing as T
+    from odomgraph.sim.scenarios import paper
+    from odomgraph.sim.simulate import simulate
+    log = simulate(paper(40.0), 311)
+    k = (0.9, 1.1, 0.85)
+
+    def offsets(log, scales, skip=(), max_misfit=None):
+        if tuple(scales) == k:
+            return [T.Offset(d, 0.004, 10.0 * i, 10.0 * i + 10.0) for i, d in
+                    enumerate((-0.001, -0.004, -0.003, 0.007, -0.005))]
+        return [T.Offset(0.462, 0.038, 31.0, 41.0)]
+    monkeypatch.setattr(T, "window_offsets", offsets)
+    monkeypatch.setattr(T, "joint_fit", lambda *a, **kw: None)
+    mean = np.zeros((1, 11))
+    mean[0, 8:11] = k
+    assert T.gps_offset_warnings(log, SimpleNamespace(mean=mean)) == []
+    # the same lone window, with the estimate's path fitting none: said
+    monkeypatch.setattr(T, "window_offsets", lambda log, scales, skip=(), max_misfit=None:
+                        [] if tuple(scales) == k else [T.Offset(0.462, 0.038, 31.0, 41.0)])
+    said = T.gps_offset_warnings(log, SimpleNamespace(mean=mean))
+    assert len(said) == 1 and "+0.46 s late" in said[0], said

@@ -129,10 +129,24 @@ def _bin_means(t: np.ndarray, x: np.ndarray, width: float) -> np.ndarray:
     return s[n > 0] / n[n > 0]
 
 
-def mounting_warnings(log) -> list[str]:
-    """One line per mounting or wiring mistake that the log shows."""
+def gyro_in_degrees(log) -> str | None:
+    """The line for a gyro that follows the wheels' turns 35-90 times over
+    (57.3: degrees per second read as rad/s), or None. Not a mounting
+    mistake to warn of but a unit to fix: pipeline.estimate refuses the log
+    with it (a probe's deg/s gyro ran on with 11 warnings and wrote scale
+    factors of 0.1)."""
+    gyro_c, slope, _ = _gyro_against_wheels(log)
+    if gyro_c is not None and gyro_c > MIN_CORRELATION and 35.0 < slope < 90.0:
+        return (f"the gyro reads {slope:.0f}x the wheels' turn rate: it looks like degrees per second, and the "
+                "log must hold rad/s")
+    return None
+
+
+def _gyro_against_wheels(log) -> tuple[float | None, float | None, bool]:
+    """(correlation of the gyro with the wheels' yaw rate, the ratio of their
+    fast turns (gyro / wheels), whether the gyro is flat), the first two None
+    when the log turns too little to tell."""
     from odomgraph.analysis.holdout import wheel_yaw_rate_at_gyro
-    fix_c = fix_turn_correlation(log)
     gyro_c, slope, gyro_flat = None, None, False
     rate = wheel_yaw_rate_at_gyro(log)
     if rate is not None:
@@ -151,6 +165,13 @@ def mounting_warnings(log) -> list[str]:
             # gave 0.64 and 0.34 on a log with slip); the top of each
             # distribution is the robot's real turns.
             slope = float(np.percentile(np.abs(g), 95) / np.percentile(np.abs(w), 95))
+    return gyro_c, slope, gyro_flat
+
+
+def mounting_warnings(log) -> list[str]:
+    """One line per mounting or wiring mistake that the log shows."""
+    fix_c = fix_turn_correlation(log)
+    gyro_c, slope, gyro_flat = _gyro_against_wheels(log)
     units = _wheel_units_line(gyro_c, slope)
     if units:
         return [units]     # every check below reads the wheels in their units, and would blame something else
@@ -210,8 +231,7 @@ def mounting_warnings(log) -> list[str]:
                        + (", or the robot drove straight and the wheels' difference was slip"
                           if gyro_flat and fix_c is None else ""))
     elif gyro_c > 0 and 35.0 < slope < 90.0:
-        out.append(f"the gyro reads {slope:.0f}x the wheels' turn rate: it looks like degrees per second, and the "
-                   "log must hold rad/s")
+        out.append(gyro_in_degrees(log))
     return out
 
 

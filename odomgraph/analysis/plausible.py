@@ -161,12 +161,17 @@ TRANSFER_REL = 0.005
 #: whenever the wheel turns.
 TRANSFER_SIGN = 0.7
 TRANSFER_MIN_S = 10.0
+#: A row counts only this close [s] to an absolute measurement.
+TRANSFER_SEEN = 1.0
 
 
-def window_transfer_warnings(est, track_width: float) -> list[str]:
+def window_transfer_warnings(est, track_width: float, seen: np.ndarray) -> list[str]:
     """One line per wheel whose slip after the calibration window (``est.t_switch``)
     is a steady share of its ground speed far beyond its scale factor's sigma;
-    [] when there is none (or no window).
+    [] when there is none (or no window). Only rows within TRANSFER_SEEN of
+    an absolute measurement (``seen``: their sorted times [s]) count: in a
+    GPS outage the slips wander with nothing to hold them (a probe's 60 s
+    outage read 5 % at 27 sigma, the scale factors right).
 
     Why: the paper's schedule holds slip at zero while it calibrates (eq.
     35-36), so a wheel that slipped by a little for part of the window (1.5-5
@@ -190,6 +195,11 @@ def window_transfer_warnings(est, track_width: float) -> list[str]:
     t = est.t
     dt = np.diff(t, append=t[-1])
     after = t > est.t_switch + TRANSFER_AFTER
+    if len(seen) == 0:
+        return []
+    k = np.clip(np.searchsorted(seen, t), 1, max(len(seen) - 1, 1))
+    near = np.minimum(np.abs(t - seen[k - 1]), np.abs(seen[np.minimum(k, len(seen) - 1)] - t))
+    after &= near <= TRANSFER_SEEN
     ground, _ = wheel_motion(est, track_width)
     slip = est.mean[:, S.SLIP]
     out = []

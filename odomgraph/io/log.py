@@ -356,6 +356,11 @@ def read_log(directory: Path | str) -> Log:
             raise LogFormatError(p, f"scale factors must be positive finite numbers, got {list(scales)}")
     warn = tuple(f"{name}: {int(n)} row(s) written twice (same stamp and values) were read once"
                  for name, n in dups.items() if n)
+    # A sensor file with a header and no rows is no sensor: said, as a missing
+    # file is not (a probe's empty gps.csv ran as "no absolute sensor" unnamed).
+    warn += tuple(f"{sf.file}: a header and no rows: the log has no {sf.name} measurements"
+                  for sf in SENSOR_FILES if sf.name in read and hasattr(read[sf.name], "t")
+                  and len(read[sf.name].t) == 0)
     prov, prov_warn = _provenance(d / IMPORT_FILE)
     log = Log(robot, **read, truth=truth, truth_scales=scales, path=d, warnings=prov_warn + warn,
               provenance=prov, t_origin=origin[0] if origin else 0)
