@@ -381,3 +381,24 @@ def test_the_schedule_counts_from_the_wheels_when_references_lead(which, seed, l
     z = (est.mean[-1, S.WHEEL_SCALE_S] - truth) / est.sigma[-1, S.WHEEL_SCALE_S]
     assert np.all(np.abs(z) < 3.0), z
     assert np.all(est.sigma[-1, S.WHEEL_SCALE_S] < 0.02)      # calibrated, not the prior's
+
+
+@pytest.mark.parametrize("which,seed,value", [("paper", 18, 0.0), ("yard", 19, 0.01)])
+def test_a_dead_gyro_is_refused_in_one_line(tmp_path, which, seed, value):
+    """A gyro whose every sample reads one value while the wheels turn (a
+    probe's all-zero gyro: three estimators stopped on a divergence that
+    named nothing, isam2 wrote scale factors 24 sigma off) is refused,
+    naming gyro.csv; a robot that does not turn keeps its quiet gyro."""
+    from odomgraph.io.log import write_log
+    _, log = _log(which, seed, 40.0)
+    d = write_log(log.with_(gyro=replace(log.gyro, omega=np.full(log.gyro.omega.size, value))), tmp_path / "log")
+    r = CliRunner().invoke(app, ["estimate", str(d), "-o", str(tmp_path / "est"), "-m", "batch"])
+    lines = [ln for ln in r.output.splitlines() if ln.startswith("odomgraph: error")]
+    assert r.exit_code == 1 and len(lines) == 1, r.output
+    assert lines[0].startswith(f"odomgraph: error: {d / 'gyro.csv'}: every gyro sample reads {value:g} rad/s "
+                               "while the wheels turn"), lines
+    from odomgraph.analysis.mounting import dead_gyro
+    e = log.encoders
+    straight = log.with_(encoders=replace(e, ticks_right=e.ticks_left),
+                         gyro=replace(log.gyro, omega=np.zeros(log.gyro.omega.size)))
+    assert dead_gyro(straight) is None

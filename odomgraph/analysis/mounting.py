@@ -142,6 +142,24 @@ def gyro_in_degrees(log) -> str | None:
     return None
 
 
+def dead_gyro(log) -> str | None:
+    """The line for a gyro every sample of which reads one value while the
+    wheels turn (MIN_TURNED rad and more), or None: a dead sensor or a
+    channel that is no yaw rate. Refused by pipeline.estimate as a unit is
+    (a probe's all-zero gyro: three estimators stopped with a divergence that
+    named nothing, isam2 wrote scale factors 24 sigma off)."""
+    from odomgraph.analysis.holdout import wheel_yaw_rate_at_gyro
+    rate = wheel_yaw_rate_at_gyro(log)
+    if rate is None or len(rate[0]) < MIN_SAMPLES or np.ptp(rate[1]) > 0:
+        return None
+    t, g, w = rate
+    w = _bin_means(t, w, BIN)
+    if np.std(w) < MIN_TURN or float(np.sum(np.abs(w)) * BIN) < MIN_TURNED:
+        return None
+    return (f"every gyro sample reads {float(g[0]):g} rad/s while the wheels turn {float(np.sum(np.abs(w)) * BIN):.0f} "
+            "rad: a dead gyro, or a channel that is no yaw rate; remove gyro.csv to estimate without it")
+
+
 def _gyro_against_wheels(log) -> tuple[float | None, float | None, bool]:
     """(correlation of the gyro with the wheels' yaw rate, the ratio of their
     fast turns (gyro / wheels), whether the gyro is flat), the first two None
