@@ -14,7 +14,10 @@ Topics are picked by their type when the choice is unambiguous, or given:
     (v, omega) becomes per-wheel surface speeds through the nominal track,
     v -/+ omega b/2. This assumes the odometry came from the wheels alone
     (diff_drive_controller's does; robot_localization's filtered output does
-    not, and is never picked by itself);
+    not, and is never picked by itself; nor is a velocity command, /cmd_vel:
+    what was asked of the wheels, not what they did);
+  - two std_msgs integer tick counters named left/right, when no other topic
+    may be the wheels' measurement or --ticks-per-meter is given;
 * GPS: ``sensor_msgs/NavSatFix`` -> lat/lon projected to a local east/north
   frame at the first fix; fixes with status < 0 (no fix) are dropped and
   counted; the position covariance, when given, becomes each fix's sigma;
@@ -26,7 +29,11 @@ Topics are picked by their type when the choice is unambiguous, or given:
   (base_link -> the IMU's frame) is used when the bag has it.
 
 Times are the messages' header stamps, the clock the sensors share (or the
-bag's receive times). Bags on a real clock start near 1.7e9 s, where a
+bag's receive times). Tick counters, without a header, carry the receive
+times: when the header topics' receive times run a clock offset after their
+stamps, the counters are moved onto the header clock, with a warning; a
+header topic on a clock of its own (GPS time, a boot clock) is said, or
+refused when its times would not meet the others'. Bags on a real clock start near 1.7e9 s, where a
 float64 keeps only 0.24 us: the log counts from the first whole second
 (Log.t_origin), taken from the integer nanoseconds, so no interval loses a
 digit, and the files written carry the absolute stamps.
@@ -58,6 +65,19 @@ TICK_TYPES = {"std_msgs/msg/Int16": 16, "std_msgs/msg/UInt16": 16, "std_msgs/msg
 #: Words of topic names that are never picked as wheels by themselves: fused, not wheel, odometry.
 #: Matched against whole words of the name (a probe: "/volksbot/odom" was refused for "vo").
 NOT_WHEELS = ("filtered", "ekf", "fused", "global", "gps", "visual", "vo", "vio", "slam")
+#: Words of topic names that say a velocity command: what a planner, a
+#: joystick or a teleop node asked for, not what the wheels did (a probe:
+#: Nav2's stamped /cmd_vel taken for the wheels calibrated the command, every
+#: scale z -34 to +36 with status ok). Never picked by themselves; given with
+#: --wheel-topic, a warning. Whole words, as NOT_WHEELS.
+COMMAND_WORDS = ("cmd", "command", "commands", "teleop", "joy", "joystick", "keyboard", "setpoint", "reference",
+                 "ref", "target", "goal", "nav", "desired", "demand")
+#: ...unless a word of the name says it was measured (a controller's feedback
+#: published as /cmd_vel_measured).
+MEASURED_WORDS = ("measured", "meas", "feedback", "fb", "actual")
+#: Velocity messages that no driver publishes as a measurement (no stamp, no
+#: frame): named in the refusal when a bag holds only commands.
+COMMAND_TYPES = ("geometry_msgs/msg/Twist",)
 #: The stamp given to a message whose header stamp is unset (0 s 0 ns) while it is read.
 UNSET = -np.inf
 AXES = ("x", "y", "z")
@@ -114,13 +134,20 @@ def _reader(bag: Path):
 def _unreadable(bag: Path, exc: Exception) -> LogFormatError:
     """rosbags' error for a bag it cannot read, in one line, with the
     remedy when it is a recording that was killed: a ROS 1 bag cut off
-    before its index was written, a ROS 2 directory without metadata.yaml."""
+    before its index was written, a ROS 2 directory without metadata.yaml,
+    an mcap file cut off before its footer ("File end magic is invalid")."""
     text = " ".join(str(exc).split())
     storage = [f for f in bag.iterdir() if f.suffix in (".db3", ".mcap")] if bag.is_dir() else []
     if storage and not (bag / "metadata.yaml").exists():
         return LogFormatError(bag, f"cannot read the bag: no metadata.yaml (a recording that was killed?): "
                                    f"'ros2 bag reindex {bag}"
                                    f"{' -s mcap' if storage[0].suffix == '.mcap' else ''}' writes it")
+    if storage and storage[0].suffix == ".mcap" and "magic" in text.lower():
+        # a recording killed before it wrote the mcap file's footer (a probe: no remedy said)
+        return LogFormatError(bag, f"cannot read the bag: {text} (a recording that was killed?): "
+                                   f"'mcap recover {storage[0]} -o FIXED.mcap' (the mcap CLI) rescues its messages; "
+                                   f"put FIXED.mcap alone in a directory and 'ros2 bag reindex DIR -s mcap' writes "
+                                   "its metadata.yaml")
     if bag.is_file() and type(exc).__module__.startswith("rosbags") and "index" in text.lower():
         return LogFormatError(bag, f"cannot read the bag: {text} (a recording that was killed?): "
                                    f"'rosbag reindex {bag}' mends it")
@@ -139,13 +166,32 @@ def _increasing(t: np.ndarray, *cols):
     return (t[keep], *(c[order][keep] for c in cols))
 
 
-def _not_wheels(topic: str) -> bool:
-    """True when a word of the topic's name (split at "/", "_", "-", the
-    like and camelCase; trailing digits dropped, so "ekf2" is "ekf") says it
-    is not the wheels' own odometry."""
+def _words(topic: str) -> set[str]:
+    """The words of a topic's name: split at "/", "_", "-", the like and
+    camelCase, lower case, trailing digits dropped ("ekf2" is "ekf")."""
     spaced = re.sub(r"([a-z0-9])([A-Z])", r"\1 \2", topic)       # camelCase: /odomFiltered
-    words = (w.rstrip("0123456789") for w in re.split(r"[^a-z0-9]+", spaced.lower()))
-    return any(w in NOT_WHEELS for w in words)
+    return {w.rstrip("0123456789") for w in re.split(r"[^a-z0-9]+", spaced.lower())}
+
+
+def _not_wheels(topic: str) -> bool:
+    """True when a word of the topic's name says it is not the wheels' own
+    odometry (NOT_WHEELS)."""
+    return bool(_words(topic) & set(NOT_WHEELS))
+
+
+def _is_command(topic: str) -> bool:
+    """True when a word of the topic's name says a velocity command
+    (COMMAND_WORDS: /cmd_vel, /teleop/twist, /nav_vel), and none says it was
+    measured (MEASURED_WORDS)."""
+    words = _words(topic)
+    return bool(words & set(COMMAND_WORDS)) and not words & set(MEASURED_WORDS)
+
+
+def _commands(conns) -> list[str]:
+    """The topics, with messages, that carry velocity commands: of a wheel
+    type with a name that says so (_is_command), or bare Twists (COMMAND_TYPES)."""
+    return sorted({c.topic for c in conns if c.msgcount > 0 and (
+        c.msgtype in COMMAND_TYPES or (c.msgtype in WHEEL_TYPES and _is_command(c.topic)))})
 
 
 def _drop_unset(topic: str, rows: list, real_clock: bool, notes: list, publisher=None) -> None:
@@ -218,6 +264,92 @@ def _steps_back(bag, topic: str, rows: list, wheels: bool, warnings: list) -> No
     warnings.append(line)
 
 
+#: Header-stamped topics whose median (receive - header) lags differ by more
+#: than CLOCK_AGREE_S [s], and by more than CLOCK_JITTER_TIMES their lags'
+#: jitter (robust sigma), run on different clocks: a GPS receiver publishes
+#: its fix within half a second, an IMU within milliseconds (a probe: a GPS
+#: stamped on GPS time, 18 s ahead of the others, imported without a word).
+CLOCK_AGREE_S = 1.0
+CLOCK_JITTER_TIMES = 10.0
+#: Receive-stamped topics (tick counters) are moved onto the header clock
+#: when the least lag of the header topics is this far [s] or more: beyond
+#: what a message takes to reach the recorder (milliseconds on one machine,
+#: tens over a network) or a receiver to publish its fix (a probe: a bag
+#: recorded 10 s late put the encoders 10 s behind gps.csv and gyro.csv).
+CLOCK_SHIFT_S = 0.25
+#: GPS time runs this far [s] ahead of UTC (leap seconds since 1980, as of 2017).
+GPS_LEAP_S = 18.0
+
+
+def _header_clocks(bag, clocks: dict[str, np.ndarray], roles: dict[str, str], receive: list[str], span_s: float,
+                   warnings: list) -> int:
+    """The shift [ns] that takes the receive-stamped topics ``receive`` (the
+    tick counters, without a header) onto the header topics' clock, from each
+    header topic's median lag (receive - header) [ns] (``clocks``: {topic:
+    (N, 2) [receive, header] int64 [ns]}, unset stamps left out; ``roles``:
+    {topic: wheels, imu or gps}).
+
+    The clock is the one most header topics agree on (CLOCK_AGREE_S; on a
+    tie, the one nearest the receive times). A header topic off it is a
+    warning naming it and its offset, or, when its times would not meet the
+    others' (off by more than the bag's span ``span_s`` [s]: a sensor's boot
+    clock, the GPS epoch), refused with the --stamps receive remedy. The
+    receive-stamped topics move by the agreeing topics' least lag (the least
+    delayed, an IMU: the clocks' offset) when that is CLOCK_SHIFT_S or more,
+    with a warning; header stamps on a simulated clock (use_sim_time, from
+    0 s) beside receive times on a wall clock are refused."""
+    lags = {t: np.sort(v[:, 0] - v[:, 1]) for t, v in clocks.items() if len(v)}
+    if not lags:
+        return 0
+    med = {t: int(d[d.size // 2]) for t, d in lags.items()}
+    sec = {t: 1e-9 * m for t, m in med.items()}
+    jitter = {t: 1e-9 * robust_sigma(d - med[t]) for t, d in lags.items()}
+
+    def agree(a: str, b: str) -> bool:
+        return abs(sec[a] - sec[b]) <= max(CLOCK_AGREE_S, CLOCK_JITTER_TIMES * (jitter[a] + jitter[b]))
+    topics = sorted(lags)
+    ref = max(topics, key=lambda t: (sum(agree(t, u) for u in topics), -abs(sec[t])))
+    same = [t for t in topics if agree(ref, t)]
+    for t in topics:
+        if t in same:
+            continue
+        ahead = sec[ref] - sec[t]      # its header clock less the others' [s]
+        role = roles.get(t, "wheels")
+        leap = " (GPS time runs 18 s ahead of UTC)" if role == "gps" and abs(ahead - GPS_LEAP_S) < 1.0 else ""
+        line = (f"{t}: its header stamps are {abs(sec[t]):.4g} s off its receive times, those of {same} "
+                f"{abs(sec[ref]):.2g} s (receive - header, medians): its header clock runs {abs(ahead):.4g} s "
+                f"{'ahead of' if ahead > 0 else 'behind'} theirs{leap}")
+        remedy = ("--stamps receive stamps every topic with the bag's receive times"
+                  + ("" if role == "wheels" else f", or --{role}-topic '' leaves it out"))
+        if abs(ahead) > max(span_s, CLOCK_AGREE_S):
+            raise LogFormatError(bag, f"{line}, and its times would not meet theirs (a sensor's own clock?): {remedy}")
+        warnings.append(f"{line}: its rows in the log are that far off the others'; {remedy}")
+    if not receive:
+        return 0
+    lead = min(same, key=lambda t: abs(med[t]))       # the least delayed: the clocks' offset
+    shift = med[lead]
+    if abs(shift) < CLOCK_SHIFT_S * 1e9:
+        return 0
+    rx, hdr = (int(np.median(clocks[lead][:, c])) for c in (0, 1))
+    if hdr < ORIGIN_ABOVE * 1e9 <= rx:
+        raise LogFormatError(bag, f"the tick counters {receive} carry the bag's receive times (a wall clock, near "
+                                  f"{rx * 1e-9:.4g} s) while the header stamps of {same} run on a simulated clock "
+                                  f"(use_sim_time, near {hdr * 1e-9:.4g} s): no offset puts them on one clock; "
+                                  "--stamps receive stamps every topic with the receive times")
+    warnings.append(f"the tick counters {receive} carry the bag's receive times, {abs(shift) * 1e-9:.4g} s "
+                    f"{'after' if shift > 0 else 'before'} the header stamps of {same} (receive - header of {lead}, "
+                    f"median): two clocks; the counters are moved {abs(shift) * 1e-9:.4g} s "
+                    f"{'earlier' if shift > 0 else 'later'}, onto the header clock (--stamps receive puts every "
+                    "topic on the receive clock instead)")
+    return shift
+
+
+def _seconds(rows: list, origin_ns: int | None) -> list:
+    """Rows whose first element is a stamp in integer nanoseconds (or UNSET)
+    with that stamp in seconds since ``origin_ns``, in the same order."""
+    return [(r[0] if r[0] == UNSET else 1e-9 * (r[0] - (origin_ns or 0)), *r[1:]) for r in rows]
+
+
 def _candidates(conns) -> dict[str, list]:
     """{role: [connection, ...]} of the topics each role could take."""
     out = {"wheels": [], "imu": [], "gps": []}
@@ -245,6 +377,38 @@ def _tick_pair(conns) -> tuple[str, str] | None:
     its name and the one with "right", or None when that is not clear."""
     ls, rs = _tick_candidates(conns)
     return (ls[0], rs[0]) if len(ls) == 1 and len(rs) == 1 else None
+
+
+def _measured_wheels(cands: dict[str, list]) -> list[str]:
+    """The wheel candidates that may be the wheels' own measurement: neither
+    fused (_not_wheels) nor a command (_is_command)."""
+    return sorted({c.topic for c in cands["wheels"] if not _not_wheels(c.topic) and not _is_command(c.topic)})
+
+
+def _auto_ticks(bag, conns, cands: dict[str, list], ticks_given: bool, notes: list) -> tuple[str, str] | None:
+    """The tick counters taken as the wheels when no wheel topic is named:
+    the pair named left/right (_tick_pair) when the bag has no other topic
+    that may be the wheels' measurement (commands and fused outputs are
+    none), or when --ticks-per-meter is given: raw encoder counts are the
+    wheels' own measurement, a twist beside them at best derived from them
+    (a probe: the counters and the option passed over for /cmd_vel). Else a
+    note names the counters. Integer topics that are no clear pair are
+    refused when counters would be taken."""
+    measured = _measured_wheels(cands)
+    pair = _tick_pair(conns)
+    if pair and (ticks_given or not measured):
+        notes.append(f"wheels: picked the tick counters {pair[0]} and {pair[1]}"
+                     + (f" (the encoders' own counts, --ticks-per-meter given) over {measured}" if measured else ""))
+        return pair
+    if pair:
+        notes.append(f"tick counters {pair[0]} and {pair[1]} beside {measured}: --ticks-per-meter TPM takes them "
+                     "(the encoders' own counts) instead")
+        return None
+    ls, rs = _tick_candidates(conns)
+    if (ls or rs) and (ticks_given or not measured):
+        raise LogFormatError(bag, f"integer topics that may be tick counters: left {ls or 'none'}, "
+                                  f"right {rs or 'none'}; not one of each: give --tick-topics LEFT,RIGHT")
+    return None
 
 
 def _unwrap_counts(c: np.ndarray, bits: int | None, notes: list | None = None, topic: str = "") -> np.ndarray:
@@ -326,17 +490,36 @@ def _encoders_from_ticks(bag, left: tuple, right: tuple, notes: list) -> Encoder
 def _pick(cands: dict[str, list]) -> dict[str, str | None]:
     """{role: topic or None}: the one candidate of each role, or None when
     there is none or the choice is ambiguous. Wheel odometry is preferred to
-    topics whose names say they are fused, and JointState to odometry."""
+    topics whose names say they are fused, JointState to odometry, and a
+    velocity command (_is_command) is never the wheels."""
     picks = {}
     for role, cs in cands.items():
         cs = list(cs)
         if role == "wheels":
-            cs = [c for c in cs if not _not_wheels(c.topic)]
+            cs = [c for c in cs if not _not_wheels(c.topic) and not _is_command(c.topic)]
             joints = [c for c in cs if WHEEL_TYPES[c.msgtype] == "joints"]
             cs = joints if len(joints) == 1 else cs
         topics = sorted({c.topic for c in cs})
         picks[role] = topics[0] if len(topics) == 1 else None
     return picks
+
+
+def _options_apply(bag, kind: str, wheels, types: dict, ticks_per_meter, wheel_radius, left_joint,
+                   right_joint) -> None:
+    """Refuse an option given for other wheels than the ones picked
+    (``wheels``: a topic, or the (left, right) tick counters; ``kind``:
+    joints, odometry, twist or ticks): ignored, it would be recorded in
+    import.json as used (a probe: --ticks-per-meter 2000 and --left-joint
+    foo beside TwistStamped wheels, exit 0, the wrong wheels unseen)."""
+    picked = (f"the tick counters {list(wheels)}" if kind == "ticks"
+              else f"{wheels} ({types[wheels].split('/')[-1]})")
+    for name, value, wants in (("--ticks-per-meter", ticks_per_meter, "ticks"),
+                               ("--wheel-radius", wheel_radius, "joints"), ("--left-joint", left_joint, "joints"),
+                               ("--right-joint", right_joint, "joints")):
+        if value is not None and kind != wants:
+            raise LogFormatError(bag, f"{name} is for {'tick counters' if wants == 'ticks' else 'JointState wheels'}, "
+                                      f"but the wheels picked are {picked}: leave it out, or name the wheels it is for "
+                                      f"({'--tick-topics LEFT,RIGHT' if wants == 'ticks' else '--wheel-topic'})")
 
 
 def list_topics(bag: Path | str) -> tuple[list[Topic], list[str]]:
@@ -348,7 +531,7 @@ def list_topics(bag: Path | str) -> tuple[list[Topic], list[str]]:
             conns = list(reader.connections)
             cands = _candidates(conns)
             picks = _pick(cands)
-            pair = _tick_pair(conns) if not cands["wheels"] else None
+            pair = _tick_pair(conns) if not _measured_wheels(cands) else None
             if pair:
                 picks["wheels (left ticks)"], picks["wheels (right ticks)"] = pair
             span = max(reader.duration * 1e-9, 1e-9)
@@ -538,6 +721,10 @@ def _joint_rows(bag, topic: str, msgs: list, left: str | None, right: str | None
             raise LogFormatError(bag, f"{topic}: joints {left!r}/{right!r} not in "
                                       f"{sorted({j for n in counts for j in n})} (--left-joint/--right-joint)")
     else:
+        held = sorted({j for n in counts for j in n})
+        for option, joint in (("--left-joint", left), ("--right-joint", right)):
+            if joint and joint not in held:
+                raise LogFormatError(bag, f"{topic}: {option} {joint!r} is not a joint it holds (its joints: {held})")
         pairs, error = {}, None
         for names in counts:
             try:
@@ -602,9 +789,13 @@ def import_rosbag(bag: Path | str, wheel_topic: str | None = None, left_joint: s
     axis the data show. ``stamps``: "header" (the sensors' clock) or
     "receive" (the time the bag recorded each message). ``tick_topics``:
     (left, right) std_msgs integer tick counters, picked by name ("left",
-    "right") when the bag has no other wheel topic; they need
+    "right") when the bag has no other topic that may be the wheels'
+    measurement, or ``ticks_per_meter`` is given (_auto_ticks); they need
     ``ticks_per_meter`` (one value or (left, right)) and, having no header,
-    are stamped with the bag's receive times."""
+    are stamped with the bag's receive times, moved onto the header clock
+    when the two differ (_header_clocks). Options for other wheels than the
+    ones picked are refused (_options_apply); a velocity command is taken
+    only when named, with a warning."""
     bag = Path(bag)
     if track_width is None or not (np.isfinite(track_width) and track_width > 0):
         raise LogFormatError(bag, f"import rosbag needs a positive, finite --track-width (the nominal robot) [m], "
@@ -631,16 +822,9 @@ def import_rosbag(bag: Path | str, wheel_topic: str | None = None, left_joint: s
                                           "odomgraph import rosbag BAG --list shows them)")
             cands = _candidates(conns)
             picks = _pick(cands)
-            if tick_topics is None and wheel_topic is None and not cands["wheels"]:
-                tick_topics = _tick_pair(conns)
-                if tick_topics:
-                    notes.append(f"wheels: picked the tick counters {tick_topics[0]} and {tick_topics[1]}")
-                else:
-                    ls, rs = _tick_candidates(conns)
-                    if ls or rs:
-                        raise LogFormatError(bag, f"integer topics that may be tick counters: left {ls or 'none'}, "
-                                                  f"right {rs or 'none'}; not one of each: give --tick-topics "
-                                                  "LEFT,RIGHT")
+            if tick_topics is None and wheel_topic is None:
+                tick_topics = _auto_ticks(bag, conns, cands, ticks_per_meter is not None, notes)
+            commands = _commands(conns)
             if tick_topics:
                 wheel_topic = ""      # the counters are the wheels
             chosen = {}
@@ -648,8 +832,17 @@ def import_rosbag(bag: Path | str, wheel_topic: str | None = None, left_joint: s
                 if given is None:
                     given = picks[role]
                     if given is None and cands[role] and role == "wheels":
-                        raise LogFormatError(bag, "no topic is clearly the wheels' own odometry among "
-                                                  f"{sorted({c.topic for c in cands[role]})}: give --wheel-topic")
+                        others = sorted({c.topic for c in cands[role]} - set(commands))
+                        if not others:
+                            raise LogFormatError(bag, f"the bag's only wheel topics are velocity commands {commands}: "
+                                                      "a command is what was asked of the wheels, not what they did, "
+                                                      "and calibrates nothing; give --wheel-topic to take one anyway")
+                        pair = _tick_pair(conns)
+                        raise LogFormatError(bag, f"no topic is clearly the wheels' own odometry among {others}"
+                                                  + (f" (velocity commands {commands} are no wheels)" if commands
+                                                     else "") + ": give --wheel-topic"
+                                                  + (f" (or --ticks-per-meter for the tick counters {list(pair)})"
+                                                     if pair else ""))
                     if given is None and len({c.topic for c in cands[role]}) > 1:
                         raise LogFormatError(bag, f"several {role} topics ({sorted({c.topic for c in cands[role]})}): "
                                                   f"give --{role}-topic (or --{role}-topic '' for none)")
@@ -670,7 +863,8 @@ def import_rosbag(bag: Path | str, wheel_topic: str | None = None, left_joint: s
             elif chosen["wheels"] is None:
                 raise LogFormatError(bag, "no wheel topic (sensor_msgs/JointState, nav_msgs/Odometry, "
                                           "geometry_msgs/TwistStamped or left/right std_msgs tick counters) in "
-                                          "the bag; --list shows what it has")
+                                          "the bag" + (f"; {commands}: velocity commands, not wheel measurements"
+                                                       if commands else "") + "; --list shows what it has")
             elif types[chosen["wheels"]] not in WHEEL_TYPES:
                 raise LogFormatError(bag, f"{chosen['wheels']}: a {types[chosen['wheels']]} cannot be wheels")
             else:
@@ -681,10 +875,18 @@ def import_rosbag(bag: Path | str, wheel_topic: str | None = None, left_joint: s
             if kind == "joints" and (wheel_radius is None or wheel_radius <= 0):
                 raise LogFormatError(bag, f"{chosen['wheels']} holds JointState wheels: give a positive "
                                           "--wheel-radius [m]")
+            _options_apply(bag, kind, chosen["wheels"] or tick_topics, types, ticks_per_meter, wheel_radius,
+                           left_joint, right_joint)
+            if kind != "ticks" and wheel_topic and _is_command(wheel_topic):
+                warnings.append(f"{wheel_topic}: its name says a velocity command, not a wheel measurement: taken "
+                                "as the wheels (--wheel-topic), it holds what was asked of them, not their slip, "
+                                "lag or scale, and a calibration from it calibrates the command")
             use = [c for c in conns if c.topic in chosen.values() or c.topic in (tick_topics or ())]
             ticks = {t: [] for t in tick_topics or ()}
             joint_msgs = []
-            origin_ns = None
+            # the first stamp read [ns] and its topic: the log's origin (below); each header
+            # topic's (receive, header) stamps [ns], for _header_clocks
+            first, clocks = None, {}
             for conn, t_rx, raw in reader.messages(connections=use):
                 msg = reader.deserialize(raw, conn.msgtype)
                 ns = int(t_rx) if stamps == "receive" or conn.topic in ticks else _stamp_ns(msg)
@@ -693,12 +895,12 @@ def import_rosbag(bag: Path | str, wheel_topic: str | None = None, left_joint: s
                     # 27 years); _drop_unset decides once the topic is read
                     stamp = UNSET
                 else:
-                    if origin_ns is None:
-                        # A real clock counts from the first whole second (Log.t_origin): the
-                        # difference of integer nanoseconds is exact, and so is every interval.
-                        whole = ns // 1_000_000_000
-                        origin_ns = whole * 1_000_000_000 if whole >= ORIGIN_ABOVE else 0
-                    stamp = 1e-9 * (ns - origin_ns)
+                    # integer nanoseconds until every topic is read: the tick counters' receive
+                    # times may move onto the header clock (_header_clocks), then the origin is set
+                    stamp = ns
+                    first = first or (conn.topic, ns)
+                    if stamps == "header" and conn.topic not in ticks:
+                        clocks.setdefault(conn.topic, []).append((int(t_rx), ns))
                 if conn.topic == chosen["wheels"]:
                     if kind == "joints":
                         # the joints are chosen once the topic is read (_joint_rows): another
@@ -743,10 +945,29 @@ def import_rosbag(bag: Path | str, wheel_topic: str | None = None, left_joint: s
                         continue
                     rates.append((stamp, a.x, a.y, a.z))
             frames = _static_frames(reader, conns)
+            span_s = reader.duration * 1e-9
+            msg_counts = {c.topic: 0 for c in conns}
+            for c in conns:
+                msg_counts[c.topic] += c.msgcount
     except LogFormatError:
         raise
     except Exception as exc:  # rosbags raises its own types for unreadable bags
         raise _unreadable(bag, exc) from None
+    roles = {t: r for r, t in chosen.items() if t}
+    shift = _header_clocks(bag, {t: np.array(v, dtype=np.int64) for t, v in clocks.items()}, roles,
+                           list(ticks), span_s, warnings)
+    if shift:
+        ticks = {t: [(r[0] - shift, *r[1:]) for r in rows] for t, rows in ticks.items()}
+        if first and first[0] in ticks:
+            first = (first[0], first[1] - shift)
+    origin_ns = None
+    if first:
+        # A real clock counts from the first whole second (Log.t_origin): the difference of
+        # integer nanoseconds is exact, and so is every interval.
+        whole = first[1] // 1_000_000_000
+        origin_ns = whole * 1_000_000_000 if whole >= ORIGIN_ABOVE else 0
+    wheels, joint_msgs, fixes, rates = (_seconds(rows, origin_ns) for rows in (wheels, joint_msgs, fixes, rates))
+    ticks = {t: _seconds(rows, origin_ns) for t, rows in ticks.items()}
     for topic, rows in ((chosen["wheels"], joint_msgs if kind == "joints" else wheels), (chosen["gps"], fixes),
                         (chosen["imu"], rates)):
         _drop_unset(topic, rows, bool(origin_ns), notes,
@@ -845,7 +1066,16 @@ def import_rosbag(bag: Path | str, wheel_topic: str | None = None, left_joint: s
             om, line = _yaw_axis(imu_axis, ws, track_width, tg, {"x": wx, "y": wy, "z": wz}, chosen["imu"])
             if line:
                 warnings.append(line)
+        warnings.extend(_gyro_against_wheels(chosen["imu"], tg, om, ws, track_width,
+                                             " -> ".join(found[0]) if imu_axis == "auto" and mount is not None
+                                             else None))
         gyro = Gyro(tg, om)
+    for role, want, sensor, got in (("imu", IMU_TYPE, "gyro", gyro), ("gps", GPS_TYPE, "GPS", gps)):
+        warnings.extend(_said_missing(role, want, sensor, got is not None, chosen[role],
+                                      imu_topic if role == "imu" else gps_topic, types, msg_counts, warnings,
+                                      {"without a fix (status < 0)": no_fix, "at latitude 0, longitude 0": null_island,
+                                       "not a finite number": not_finite.get(chosen["gps"], 0)} if role == "gps"
+                                      else {"not a finite number": not_finite.get(chosen["imu"], 0)}))
     robot = RobotConfig(ticks_per_meter_left=float(tpm[0]) if enc is not None else 1.0,
                         ticks_per_meter_right=float(tpm[1]) if enc is not None else 1.0, track_width=track_width,
                         encoder_sigma=tuple(encoder_sigma), gps_sigma=gps_sigma, gps_origin=origin,
@@ -854,6 +1084,67 @@ def import_rosbag(bag: Path | str, wheel_topic: str | None = None, left_joint: s
     return Log(robot=robot, encoders=enc, wheel_speeds=None if enc is not None else ws, gps=gps, gyro=gyro,
                notes=tuple(notes), warnings=tuple(warnings),
                t_origin=(origin_ns or 0) // 1_000_000_000)
+
+
+def _said_missing(role: str, msgtype: str, sensor: str, got: bool, topic: str | None, given: str | None,
+                  types: dict, counts: dict, warnings: list, dropped: dict) -> list[str]:
+    """A warning when a sensor the bag has gives nothing and no warning says
+    why yet (a probe: an IMU topic without messages, named or found, and a
+    GPS whose every fix was NO_FIX, each imported in silence): the topic
+    picked or given holds no message, or none usable (``dropped``: {why:
+    how many}), or the only topics of its type (``msgtype``) hold none."""
+    if got or given == "":
+        return []
+    if topic is not None:
+        if any(w.startswith(f"{topic}:") for w in warnings):
+            return []
+        if counts.get(topic, 0) == 0:
+            return [f"{topic}: the {role.upper()} topic holds no messages: no {sensor}"]
+        why = ", ".join(f"{n} {k}" for k, n in dropped.items() if n)
+        return [f"{topic}: none of its {counts[topic]} messages is usable ({why or 'see the notes'}): no {sensor}"]
+    empty = sorted(t for t, ty in types.items() if ty == msgtype and counts.get(t, 0) == 0)
+    if not empty:
+        return []
+    return [f"{', '.join(empty)}: {'an' if role == 'imu' else 'a'} {role.upper()} topic without messages: no {sensor}"
+            if len(empty) == 1 else f"{', '.join(empty)}: {role.upper()} topics without messages: no {sensor}"]
+
+
+#: A gyro's yaw rate between these multiples of the wheels' turn rate (with a
+#: clear correlation) is in degrees per second (57.3x) read as rad/s, give or
+#: take the wheels' scale (a probe: 57x imported without a word).
+DEG_RATIO = (40.0, 80.0)
+#: The correlation of a gyro's yaw rate with the wheels' turn rate that says
+#: clearly which way it turns (a probe's IMU mounted against /tf_static: -0.80).
+CLEAR_CORR = 0.5
+
+
+def _gyro_against_wheels(topic: str, t: np.ndarray, om: np.ndarray, ws: WheelSpeeds, track: float,
+                         tf_chain: str | None) -> list[str]:
+    """Warnings when the gyro's yaw rate ``om`` (N,) at ``t`` (N,) [s]
+    contradicts the wheels' turn rate (v_right - v_left) / track [rad/s]
+    where both overlap and the run turns (MIN_TURN): about 57x of it (a gyro
+    in deg/s, DEG_RATIO), or, when the yaw axis came from /tf_static
+    (``tf_chain``: its frames), turning against it with a clear correlation
+    (CLEAR_CORR: the mounting in /tf_static is the other way up)."""
+    w = np.interp(t, ws.t, (ws.v_right - ws.v_left) / track)
+    inside = (t >= ws.t[0]) & (t <= ws.t[-1])
+    if inside.sum() < 30 or np.std(w[inside]) < MIN_TURN or np.std(om[inside]) == 0:
+        return []
+    w, o = w[inside], om[inside]
+    corr = float(np.corrcoef(o, w)[0, 1])
+    # the gyro's rate in multiples of the wheels', where they turn (2 MIN_TURN): the median, which
+    # a wheel slipping does not move (a probe's: least squares read 32x for a gyro in deg/s)
+    turning = np.abs(w) >= 2.0 * MIN_TURN
+    ratio = float(np.median(o[turning] / w[turning])) if turning.sum() >= 30 else 0.0
+    out = []
+    if tf_chain is not None and corr <= -CLEAR_CORR:
+        out.append(f"{topic}: /tf_static's mounting of {tf_chain.split(' -> ')[-1]!r} ({tf_chain}) gives a yaw rate "
+                   f"that turns against the wheels' (correlation {corr:+.2f}): the data say the IMU is mounted the "
+                   "other way up; --imu-axis (z or -z) overrides /tf_static")
+    if abs(corr) >= CLEAR_CORR and DEG_RATIO[0] <= abs(ratio) <= DEG_RATIO[1]:
+        out.append(f"{topic}: its yaw rate reads {abs(ratio):.0f}x the wheels' turn rate (correlation "
+                   f"{abs(corr):.2f}): an IMU in degrees per second (57.3x)? sensor_msgs/Imu is in rad/s")
+    return out
 
 
 def _said_equal_stamps(topic, n_in: int, n_out: int, notes: list, warnings: list | None = None) -> bool:
