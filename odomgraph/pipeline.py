@@ -356,9 +356,11 @@ def _estimate_checked(log: Log, method: Method, schedule: Schedule, progress, op
     from odomgraph.observability import few_beacons_warnings
     from odomgraph.analysis.plausible import reversed_motion_warnings, skid_warnings, window_transfer_warnings
     skid = skid_warnings(est, log.robot.track_width) if _has_reference(log) else []
-    # (a skid found says the same of the window, louder: one line is enough)
-    transfer = (window_transfer_warnings(est, log.robot.track_width, _absolute_times(log))
-                if _has_reference(log) and not skid else [])
+    # (a wheel's skid says the same of the window, louder: one line a wheel is enough)
+    transfer = [w for w in (window_transfer_warnings(est, log.robot.track_width, _absolute_times(log))
+                            if _has_reference(log) else [])
+                if not any(f"the {side} wheel" in w and f"the {side} wheel" in s for s in skid
+                           for side in ("left", "right"))]
     suspect = (_prior_warnings(est, log) + mounting_warnings(log) + dead_encoder_warnings(log)
                + reversed_motion_warnings(est, log.robot.track_width) + skid + transfer
                + path_scale_warnings(est, log)

@@ -2,6 +2,7 @@
 of logs, in one command, on a process pool or a Dask cluster. Each log's
 output equals the one-at-a-time command's; a bad log fails alone and says so."""
 import csv
+import math
 import json
 import shutil
 from pathlib import Path
@@ -168,7 +169,10 @@ def test_a_fleet_output_inside_its_directory_of_logs_is_refused(tmp_path, robots
     assert sorted(p.relative_to(logs).as_posix() for p in logs.rglob("*")) == before
     # r2 with its gyro on another axis: its calibration is refused, named as in the output
     g = (logs / "r2" / "gyro.csv").read_text().splitlines()
-    (logs / "r2" / "gyro.csv").write_text("\n".join([g[0], *(f"{ln.split(',')[0]},0.0" for ln in g[1:])]) + "\n")
+    # (a small wobble, not all zeros: a dead gyro is refused as bad input, pipeline._refuse_units)
+    (logs / "r2" / "gyro.csv").write_text("\n".join(
+        [g[0], *(f"{ln.split(',')[0]},{0.01 * math.sin(17.0 * float(ln.split(',')[0])):.6f}" for ln in g[1:])])
+        + "\n")
     res = run("calibrate", logs / "r1", logs / "r2", "--no-tune", "--workers", "1", "-o", tmp_path / "cal")
     rows = {r["name"]: r for r in csv.DictReader((tmp_path / "cal" / "fleet.csv").open())}
     assert rows["r2"]["result"] == "failed", rows["r2"]

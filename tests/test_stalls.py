@@ -229,3 +229,19 @@ def test_a_live_stream_says_each_departure_as_it_happens():
     assert said == ref.departures, (said, ref.departures)
     assert not any(DEPARTURE_SAYS in ln for ln in lines if "recovered" in ln), lines
     assert live.summary()["departures"] == ref.departures
+
+
+def test_an_older_checkpoint_moves_its_departures_out_of_the_recoveries():
+    """A live EKF checkpointed before departures had a field of their own
+    kept them among its recoveries; resumed so, they would count towards
+    MAX_RECOVERIES and "degraded". Loading moves them out."""
+    from odomgraph.estimators.ekf import EKF
+    f = EKF(stalled(*CASES["yard-3Hz"]), Schedule(20.0))
+    state = dict(f.__dict__)
+    state.pop("departures", None)           # (set when a run starts)
+    dep = f"t=45.10 s: ranges: {DEPARTURE_SAYS} (a stall, or its end); v and the slips widened to 0.8 m/s to follow"
+    other = "t=51.00 s: 5 gps measurements in a row rejected; covariance widened to re-acquire"
+    state["recoveries"] = [dep, other]
+    g = EKF.__new__(EKF)
+    g.__setstate__(state)
+    assert g.departures == [dep] and g.recoveries == [other]

@@ -136,10 +136,14 @@ def gyro_in_degrees(log) -> str | None:
     with it (a probe's deg/s gyro ran on with 11 warnings and wrote scale
     factors of 0.1)."""
     gyro_c, slope, _ = _gyro_against_wheels(log)
-    if gyro_c is not None and gyro_c > MIN_CORRELATION and 35.0 < slope < 90.0:
-        return (f"the gyro reads {slope:.0f}x the wheels' turn rate: it looks like degrees per second, and the "
-                "log must hold rad/s")
+    if gyro_c is not None and gyro_c > 0 and 35.0 < slope < 90.0:
+        return _degrees_line(slope)
     return None
+
+
+def _degrees_line(slope: float) -> str:
+    return (f"the gyro reads {slope:.0f}x the wheels' turn rate: it looks like degrees per second, and the log must "
+            f"hold rad/s (or the track width is {slope:.0f}x too large, or the wheel speeds that much too small)")
 
 
 def dead_gyro(log) -> str | None:
@@ -249,7 +253,7 @@ def mounting_warnings(log) -> list[str]:
                        + (", or the robot drove straight and the wheels' difference was slip"
                           if gyro_flat and fix_c is None else ""))
     elif gyro_c > 0 and 35.0 < slope < 90.0:
-        out.append(gyro_in_degrees(log))
+        out.append(_degrees_line(slope))
     return out
 
 
@@ -329,16 +333,21 @@ def fix_speed_correlation(log, step: float = 2.0, max_lag: float | None = None):
         px, py = np.interp(grid - lag, t_dr, ax), np.interp(grid - lag, t_dr, ay)
         return (np.hypot(np.diff(px), np.diff(py)) / step)[covered]
     w0 = wheel_speed(0.0)
+    if fix_speed.size < 10:
+        return None
+    lags = np.arange(-max_lag, max_lag + 1e-9, 0.5)
     # A wild fix (a probe's first fix 5-17 m off) makes the steps either side
     # of it disagree with the wheels by far more than the rest do; at a
     # near-constant speed those one or two steps decide the correlation
     # alone, and read as "one encoder counts backwards" they refused good
-    # logs. They are left out (beyond OUTLIER_MADS robust sigmas of the
-    # steps' disagreement), but only a few (OUTLIER_SHARE): a backwards
-    # encoder or a late clock makes most steps disagree, and is kept whole.
-    r = fix_speed - w0
-    dev = np.abs(r - np.median(r))
-    sane = dev <= max(OUTLIER_MADS * robust_sigma(r - np.median(r)), 4.0 * sig / step)
+    # logs. They are left out: beyond OUTLIER_MADS robust sigmas of the
+    # steps' disagreement at every lag tried (a late clock's speed changes
+    # agree at its lag, and stay), and only a few (OUTLIER_SHARE: a
+    # backwards encoder makes most steps disagree, and is kept whole).
+    sane = np.zeros(fix_speed.size, bool)
+    for lag in lags:
+        r = fix_speed - wheel_speed(lag)
+        sane |= np.abs(r - np.median(r)) <= max(OUTLIER_MADS * robust_sigma(r - np.median(r)), 4.0 * sig / step)
     if np.mean(~sane) > OUTLIER_SHARE:
         sane[:] = True
     fix_speed = fix_speed[sane]
@@ -348,7 +357,7 @@ def fix_speed_correlation(log, step: float = 2.0, max_lag: float | None = None):
     def corr_at(lag):
         w = wheel_speed(lag)[sane]
         return float(np.corrcoef(fix_speed, w)[0, 1]) if np.std(w) > 0 else None
-    corr = {lag: c for lag in np.arange(-max_lag, max_lag + 1e-9, 0.5) if (c := corr_at(lag)) is not None}
+    corr = {lag: c for lag in lags if (c := corr_at(lag)) is not None}
     best = max(corr, key=corr.get)
     return corr.get(0.0, float(np.corrcoef(fix_speed, w0[sane])[0, 1])), float(best), corr[best]
 

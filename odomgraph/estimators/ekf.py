@@ -414,7 +414,10 @@ class EKF:
         state.setdefault("anchored", None)
         state.setdefault("_prev", {})     # nor the departures' watch
         state.setdefault("last_departure", -np.inf)
-        state.setdefault("departures", [])    # (older checkpoints kept them among the recoveries)
+        if "departures" not in state:         # older checkpoints kept them among the recoveries
+            rec = state.get("recoveries", [])
+            state["departures"] = [r for r in rec if DEPARTURE_SAYS in r]
+            state["recoveries"] = [r for r in rec if DEPARTURE_SAYS not in r]
         self.__dict__.update(state)
         if "_rates" not in state:            # nor the rate noise kept whole
             self._rates = rate_noise(self._q, self._q_slip)
