@@ -396,12 +396,18 @@ def test_a_dead_gyro_is_refused_in_one_line(tmp_path, which, seed, value):
     lines = [ln for ln in r.output.splitlines() if ln.startswith("odomgraph: error")]
     assert r.exit_code == 1 and len(lines) == 1, r.output
     assert lines[0].startswith(f"odomgraph: error: {d / 'gyro.csv'}: every gyro sample reads {value:g} rad/s "
-                               "while the wheels turn"), lines
+                               "(within 0) while the wheels turn"), lines
     from odomgraph.analysis.mounting import dead_gyro
     e = log.encoders
     straight = log.with_(encoders=replace(e, ticks_right=e.ticks_left),
                          gyro=replace(log.gyro, omega=np.zeros(log.gyro.omega.size)))
     assert dead_gyro(straight) is None
+    # straight on wheels of unequal size (a steady wheel yaw rate) past a deadbanded gyro: not dead
+    unequal = straight.with_(encoders=replace(e, ticks_right=np.round(e.ticks_left * 1.05).astype(e.ticks_left.dtype)))
+    assert dead_gyro(unequal) is None
+    # a flicker of one least-significant step is still dead
+    flicker = log.with_(gyro=replace(log.gyro, omega=value + 1e-3 * (np.arange(log.gyro.omega.size) % 2)))
+    assert dead_gyro(flicker) is not None
 
 
 @pytest.mark.parametrize("which,seed,shift", [("paper", 21, (12.0, -7.0)), ("yard", 22, (4.0, 0.0))])

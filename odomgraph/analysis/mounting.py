@@ -146,6 +146,14 @@ def _degrees_line(slope: float) -> str:
             f"hold rad/s (or the track width is {slope:.0f}x too large, or the wheel speeds that much too small)")
 
 
+#: A gyro whose samples span at most this [rad/s] reads nothing (one
+#: least-significant step of flicker is still dead: a probe's flickering
+#: gyro passed an exact-equality test and isam2 wrote z +28)...
+DEAD_SPAN = 2e-3
+#: ...while the wheels' yaw rate varies by this much [rad/s] (std of half-second means).
+DEAD_TURN = 0.15
+
+
 def dead_gyro(log) -> str | None:
     """The line for a gyro every sample of which reads one value while the
     wheels turn (MIN_TURNED rad and more), or None: a dead sensor or a
@@ -154,14 +162,20 @@ def dead_gyro(log) -> str | None:
     named nothing, isam2 wrote scale factors 24 sigma off)."""
     from odomgraph.analysis.holdout import wheel_yaw_rate_at_gyro
     rate = wheel_yaw_rate_at_gyro(log)
-    if rate is None or len(rate[0]) < MIN_SAMPLES or np.ptp(rate[1]) > 0:
+    if rate is None or len(rate[0]) < MIN_SAMPLES or np.ptp(rate[1]) > DEAD_SPAN:
         return None
     t, g, w = rate
+    # The turns are the wheels' changes of yaw rate: a steady one is a
+    # robot driving straight on wheels of unequal size (a probe: 1.03 and
+    # 0.98 "turned" 7 rad past a deadbanded gyro reading 0).
     w = _bin_means(t, w, BIN)
-    if np.std(w) < MIN_TURN or float(np.sum(np.abs(w)) * BIN) < MIN_TURNED:
+    w = w - np.median(w)
+    turned = float(np.sum(np.abs(w)) * BIN)
+    if np.std(w) < DEAD_TURN or turned < MIN_TURNED:
         return None
-    return (f"every gyro sample reads {float(g[0]):g} rad/s while the wheels turn {float(np.sum(np.abs(w)) * BIN):.0f} "
-            "rad: a dead gyro, or a channel that is no yaw rate; remove gyro.csv to estimate without it")
+    return (f"every gyro sample reads {float(np.median(g)):g} rad/s (within {float(np.ptp(g)):.2g}) while the "
+            f"wheels turn {turned:.0f} rad: a dead gyro, or a channel that is no yaw rate; remove gyro.csv to "
+            "estimate without it")
 
 
 def _gyro_against_wheels(log) -> tuple[float | None, float | None, bool]:
