@@ -65,7 +65,7 @@ from odomgraph.estimators.schedule import Schedule
 from odomgraph.estimators.sensors import DOF, SENSOR_NAMES, WHEEL, event_stream
 from odomgraph.estimators.slipcheck import in_stretches
 from odomgraph.io.csvtable import ORIGIN_ABOVE, ORIGIN_BELOW, split_stamps
-from odomgraph.io.log import SENSOR_FILE, SENSOR_FILES, Gps, Log, Ranges, schedule_origin
+from odomgraph.io.log import MAX_COORD, MAX_RATE, MAX_SPEED, SENSOR_FILE, SENSOR_FILES, Gps, Log, Ranges, schedule_origin
 from odomgraph.io.stream import SENSOR_COLUMNS
 from odomgraph.io.robot import RobotConfig
 
@@ -88,6 +88,10 @@ LATE_SAY = 5
 #: stamp (a driver's garbage, a sensor whose clock runs ahead) would else make
 #: every later measurement "late".
 MAX_AHEAD = 2.0
+#: Per sensor, (limit, unit) of the values a line may hold (io.log.check_magnitudes's;
+#: the encoders' is a speed, checked once the row before is known: Online._impossible_ticks).
+STREAM_LIMITS = {"wheel_speeds": (MAX_SPEED, "m/s"), "gyro": (MAX_RATE, "rad/s"), "gps": (MAX_COORD, "m"),
+                 "ranges": (MAX_COORD, "m"), "velocity": (MAX_SPEED, "m/s (or rad/s)")}
 #: Measurements from that far ahead that confirm a new time: from two sensors,
 #: or this many in a row from a stream of one.
 CONFIRM_AHEAD = 3
@@ -166,6 +170,7 @@ class _Counts:
     late: dict[str, int] = field(default_factory=dict)       # older than the latency window
     repeated: dict[str, int] = field(default_factory=dict)   # a stamp the sensor sent already
     ahead: dict[str, int] = field(default_factory=dict)      # stamped far past the newest, not followed
+    impossible: dict[str, int] = field(default_factory=dict)  # encoder rows past io.log.MAX_SPEED
 
     @staticmethod
     def add(d: dict, key: str, n: int = 1) -> None:
@@ -399,6 +404,14 @@ class Online:
             raise StreamInputError(f"gps: sigma must be > 0, got {out[2]!r}")
         if sensor == "ranges" and not out[1] >= 0:
             raise StreamInputError(f"ranges: range must be >= 0, got {out[1]!r}")
+        # read_log refuses a file with such a row (io.log.check_magnitudes); a
+        # stream cannot stop for one line, so the line is skipped and said
+        limit = STREAM_LIMITS.get(sensor)
+        if limit is not None:
+            size = max(abs(v) for v in (out[1:2] if sensor == "ranges" else out[:2]))
+            if size > limit[0]:
+                raise StreamInputError(f"{sensor}: {size:.4g} {limit[1]} is not a reading a ground robot gives "
+                                       f"(limit {limit[0]:g})")
         return tuple(out)
 
     def _release(self, until: float) -> None:
@@ -419,6 +432,8 @@ class Online:
                 self.t_first = t
             if sensor == "gyro" and (self._gyro_top is None or abs(vals[0]) > abs(self._gyro_top[1][0])):
                 self._gyro_top = (t, vals)
+            if sensor == "encoders" and len(rows) >= 2:
+                self._say_impossible_ticks(rows)
             if sensor in ("encoders", "wheel_speeds"):
                 if sensor == "encoders" and len(rows) >= 2 and rows[-2][0] + 1e-9 < self.t_done \
                         and 0.5 * (rows[-2][0] + t) < self.t_done:
@@ -430,6 +445,21 @@ class Online:
                 if self.smoother is not None:
                     self.smoother.wheel_row(self._wheel_rows, t)
                 self._wheel_rows += 1
+
+    def _say_impossible_ticks(self, rows: list) -> None:
+        """Count and say an encoder row (the last of ``rows``) that reads a
+        wheel speed past io.log.MAX_SPEED over its interval, for which
+        read_log refuses a file (a probe's 99,999,999-tick row went unsaid).
+        It stays in: the cleaning (measurements.despike) takes it for the
+        counter glitch it is, from its neighbours, and dropping it would hand
+        its interval to the next row, whose ticks do not cover it."""
+        (t0, _), (t, vals) = rows[-2], rows[-1]
+        tpm = min(self.robot.ticks_per_meter_left, self.robot.ticks_per_meter_right)
+        speed = max(abs(vals[0]), abs(vals[1])) / (tpm * (t - t0))
+        if speed > MAX_SPEED:
+            _Counts.add(self.counts.__dict__.setdefault("impossible", {}), "encoders")  # (older checkpoints lack it)
+            self.alerts.append(f"encoders: the row at t={t:.3f} s reads a wheel speed of {speed:.4g} m/s, not a "
+                               f"reading a ground robot gives (limit {MAX_SPEED:g}); taken for a counter glitch")
 
     # ----------------------------------------------------------- filter
     def _log(self, t_lo: float) -> Log:
@@ -715,6 +745,11 @@ class Online:
             raise NotEnoughDataError(f"{0 if wheel is None else len(wheel.t)} encoder or wheel_speeds rows in the "
                                      f"first {self.warmup:g} s of the stream (or all of it): nothing to estimate "
                                      "from")
+        from odomgraph.analysis.mounting import unit_refusal
+        line = unit_refusal(log)
+        if line:
+            # as estimate refuses such a gyro.csv: no row from it is worth publishing
+            raise OdomgraphError(f"the gyro lines of the first {log.t_end - log.t_start:.0f} s: {line}")
         if self.method is not Method.ekf:
             self.smoother = _Smoother(self, log, final)
             self._frame_check(self.smoother.runner.prob.init, log)
@@ -822,6 +857,7 @@ class Online:
                 "repeated_stamps": dict(c.repeated), "recoveries": list(eng.recoveries) if eng else [],
                 "departures": list(getattr(eng, "departures", [])),
                 "restarts": list(self.restarts), "rejected_ahead": dict(c.ahead),
+                "rejected_impossible": dict(getattr(c, "impossible", {})),
                 "mean_nis": {k: {"mean": v[0] / v[1], "dof": v[2], "n": v[1]} for k, v in self._nis.items() if v[1]},
                 "warnings": warnings, "flags": self.flags(),
                 "notes": list(self.notes), "warmup_s": self.warmup, "latency_s": self.latency}

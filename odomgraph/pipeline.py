@@ -67,10 +67,8 @@ def _refuse_units(log: Log) -> None:
     """LogFormatError (one line, naming gyro.csv) for a gyro in degrees per
     second, or a dead one: no estimate from it is worth writing, as none is
     from stamps in milliseconds (io.log refuses those as it reads them)."""
-    from odomgraph.analysis.mounting import dead_gyro, gyro_in_degrees
-    if log.gyro is None:
-        return
-    line = dead_gyro(log) or gyro_in_degrees(log)
+    from odomgraph.analysis.mounting import unit_refusal
+    line = unit_refusal(log)
     if line:
         from odomgraph.errors import LogFormatError
         raise LogFormatError(log.path / "gyro.csv" if log.path is not None else "gyro.csv", line)

@@ -410,6 +410,29 @@ def test_a_dead_gyro_is_refused_in_one_line(tmp_path, which, seed, value):
     assert dead_gyro(flicker) is not None
 
 
+@pytest.mark.parametrize("which,seed,track", [("paper", 23, 2.2), ("yard", 24, 1.6), ("paper", 25, 2.8)])
+def test_a_degrees_gyro_on_a_skid_steer_is_refused(tmp_path, which, seed, track):
+    """A skid-steer's wheels turn 1.5-3x faster than the robot (their
+    sideways scrub, read as a track scale): a gyro in deg/s then reads
+    57.3 / 2.2 = 26x the wheels' rate, which a 35-90x band let through (a
+    probe: EKF and isam2 stopped blaming cm for m, batch wrote scale factors
+    0.3). Refused in one line naming gyro.csv; the rad/s gyro is not."""
+    from odomgraph.analysis.mounting import unit_refusal
+    from odomgraph.io.log import write_log
+    sc = (paper if which == "paper" else yard)(60.0).with_(slips=())
+    sc = sc.with_(scales=(sc.scales[0], sc.scales[1], track))
+    log = inject(sc, Faults(), seed)
+    assert unit_refusal(log) is None
+    d = write_log(log.with_(gyro=replace(log.gyro, omega=np.degrees(log.gyro.omega))), tmp_path / "log")
+    r = CliRunner().invoke(app, ["estimate", str(d), "-o", str(tmp_path / "est"), "-m", "ekf"])
+    lines = [ln for ln in r.output.splitlines() if ln.startswith("odomgraph: error")]
+    assert r.exit_code == 1 and len(lines) == 1, r.output
+    m = re.match(rf"odomgraph: error: {re.escape(str(d / 'gyro.csv'))}: the gyro reads (\d+)x the wheels' turn rate: "
+                 "it looks like degrees per second", lines[0])
+    assert m and abs(int(m.group(1)) - 57.3 / track) < 0.25 * 57.3 / track, lines
+    assert not (tmp_path / "est").exists()
+
+
 @pytest.mark.parametrize("which,seed,shift", [("paper", 21, (12.0, -7.0)), ("yard", 22, (4.0, 0.0))])
 def test_a_wild_first_fix_is_no_encoder_counting_backwards(which, seed, shift):
     """One bad first fix (a probe's: 5-17 m off at 1-10 Hz) made the fixes'

@@ -429,6 +429,65 @@ def test_bad_values_are_refused_with_a_reason():
         with pytest.raises(StreamInputError, match=what):
             live.push(*args)
 
+    # a value no ground robot gives: said as a bad line, as read_log refuses its file
+    for args, what in ((("gyro", 0.1, 2e3), "2000 rad/s is not a reading a ground robot gives"),
+                       (("gps", 0.1, 1.0, -3e8), "3e\\+08 m is not a reading"),
+                       (("wheel_speeds", 0.1, 0.5, 1.5e3), "1500 m/s is not a reading")):
+        with pytest.raises(StreamInputError, match=what):
+            live.push(*args)
+
+
+@pytest.mark.parametrize("which,seed", [("paper", 41), ("yard", 42)])
+def test_an_encoder_row_no_robot_could_drive_is_said_and_counted(which, seed):
+    """A row of 99,999,999 ticks (read_log refuses its file) went through a
+    stream unsaid (a probe): it is said as it arrives and counted at the
+    end; the cleaning takes it for a counter glitch, so the rows after it
+    stay those of the log without it."""
+    log = simulate((paper if which == "paper" else yard)(40).with_(slips=()), seed)
+    lines = list(log_lines(log))
+    k = next(i for i, ln in enumerate(lines) if ln.startswith("encoders,") and float(ln.split(",")[1]) > 30.0)
+    t = lines[k].split(",")[1]
+    lines[k] = f"encoders,{t},99999999,0"
+    sch = Schedule(calibrate_until=20.0)
+    live, rows = _stream(log, sch, lines)
+    said = [a for a in live.alerts if "not a reading a ground robot gives" in a]
+    assert len(said) == 1 and said[0].startswith(f"encoders: the row at t={float(t):.3f} s reads a wheel speed of "), \
+        live.alerts
+    assert live.summary()["rejected_impossible"] == {"encoders": 1}
+    _, clean_rows = _stream(log, sch)
+    before = [r for r in rows if r.t < float(t) - 1.0]
+    assert len(before) > 100
+    for a, b in zip(before, clean_rows):
+        assert a.t == b.t and np.allclose(a.mean, b.mean, atol=1e-9)
+    # after it: the pose within a few of its sigma of the clean stream's
+    late = {round(r.t, 6): r for r in clean_rows}
+    after = [(r, late[round(r.t, 6)]) for r in rows if r.t > float(t) + 2.0 and round(r.t, 6) in late]
+    assert len(after) > 100
+    for a, b in after:
+        assert np.all(np.abs(a.mean[:2] - b.mean[:2]) < 3.0 * np.maximum(b.sigma[:2], 0.01))
+
+
+@pytest.mark.parametrize("method", ["ekf", "isam2"])
+@pytest.mark.parametrize("fault", ["degrees", "dead"])
+def test_a_gyro_estimate_refuses_is_refused_by_the_stream(tmp_path, method, fault):
+    """estimate refuses a gyro in deg/s or a dead one; the stream published
+    rows from them (a probe): it now stops at the end of its warm-up with
+    the same line, exit 1, before any row."""
+    from dataclasses import replace
+    log = simulate(yard(45).with_(slips=()), 43 if fault == "dead" else 44)
+    g = log.gyro
+    bad = replace(g, omega=np.degrees(g.omega) if fault == "degrees" else np.zeros(g.omega.size))
+    d = write_log(log.with_(gyro=bad), tmp_path / "log")
+    r = _cli("stream", "--replay", d, "-m", method)
+    assert r.returncode == 1, r.stderr
+    assert r.stdout == HEADER + "\n"
+    lines = r.stderr.splitlines()
+    assert len(lines) == 1 and lines[0].startswith("odomgraph: error: the gyro lines of the first "), r.stderr
+    assert ("degrees per second" if fault == "degrees" else "a dead gyro") in lines[0]
+    # and estimate says the same of the file
+    r = _cli("-q", "estimate", d, "-m", method, "-o", tmp_path / "est")
+    assert r.returncode == 1 and r.stderr.count("\n") == 1 and f"{d / 'gyro.csv'}: " in r.stderr, r.stderr
+
 
 SMOOTHER_LOGS = {
     "paper seed 13": lambda: simulate(paper(60), 13),

@@ -170,6 +170,10 @@ OPEN_SMALL = {("paper, left 0.03 m/s from 6 to 19 s, seed 63", "batch")}
 def test_a_small_slip_in_the_window_is_right_or_flagged(case, method):
     make, slip, duration, seed = SMALL[case]
     est, z, status = _window_slip_run(make, slip, duration, seed, method)
+    if method == "ekf":
+        # each of these slips bends the EKF's calibration (z 9-21): the flag
+        # below is what holds it, not a calibration that came out right
+        assert np.abs(z).max() > 5.0, z
     if np.abs(z).max() > 3.0:
         assert status == "degraded", (z, est.warnings)
         assert any(f"the {slip.wheel} wheel turns" in w for w in est.flags), (z, est.flags)

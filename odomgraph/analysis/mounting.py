@@ -129,6 +129,23 @@ def _bin_means(t: np.ndarray, x: np.ndarray, width: float) -> np.ndarray:
     return s[n > 0] / n[n > 0]
 
 
+def unit_refusal(log) -> str | None:
+    """The line for a gyro no estimate should be made from (dead, or in
+    degrees per second), or None. pipeline.estimate refuses a log with it,
+    naming gyro.csv; the live stream (online.Online) once its warm-up holds
+    the turns to tell."""
+    if log.gyro is None:
+        return None
+    return dead_gyro(log) or gyro_in_degrees(log)
+
+
+#: The ratio of the gyro's fast turns to the wheels' [-] taken for degrees per
+#: second: 57.3 times a ratio of 0.35-1.5. A skid-steer's wheels "turn" up to
+#: 2-3x faster than the robot does (their sideways scrub; a probe's read 26x in
+#: deg/s); a ratio beyond 90 is no degree.
+DEGREES_RATIO = (15.0, 90.0)
+
+
 def gyro_in_degrees(log) -> str | None:
     """The line for a gyro that follows the wheels' turns 35-90 times over
     (57.3: degrees per second read as rad/s), or None. Not a mounting
@@ -136,9 +153,13 @@ def gyro_in_degrees(log) -> str | None:
     with it (a probe's deg/s gyro ran on with 11 warnings and wrote scale
     factors of 0.1)."""
     gyro_c, slope, _ = _gyro_against_wheels(log)
-    if gyro_c is not None and gyro_c > 0 and 35.0 < slope < 90.0:
+    if gyro_c is not None and gyro_c > 0 and _is_degrees(slope):
         return _degrees_line(slope)
     return None
+
+
+def _is_degrees(slope: float | None) -> bool:
+    return slope is not None and DEGREES_RATIO[0] < slope < DEGREES_RATIO[1]
 
 
 def _degrees_line(slope: float) -> str:
@@ -266,7 +287,7 @@ def mounting_warnings(log) -> list[str]:
                        "another axis than the log says, or it is not in rad/s"
                        + (", or the robot drove straight and the wheels' difference was slip"
                           if gyro_flat and fix_c is None else ""))
-    elif gyro_c > 0 and 35.0 < slope < 90.0:
+    elif gyro_c > 0 and _is_degrees(slope):
         out.append(_degrees_line(slope))
     return out
 
@@ -283,7 +304,7 @@ def _wheel_units_line(gyro_c: float | None, slope: float | None) -> str | None:
     if 35.0 < 1.0 / slope < 90.0:
         return (f"the wheels turn {1.0 / slope:.0f}x faster than the gyro: their speeds look like degrees, not "
                 "radians, times the wheel radius (or the radius, ticks per metre or track are off that much)")
-    if not 1.0 / UNITS_OFF < slope < UNITS_OFF and not 35.0 < slope < 90.0:
+    if not 1.0 / UNITS_OFF < slope < UNITS_OFF and not _is_degrees(slope):
         return (f"the gyro reads {slope:.3g}x the wheels' turn rate: the wheel speeds, or the track width, are off "
                 "by that factor (a unit: cm or mm for m?), far beyond any calibration or skid")
     return None

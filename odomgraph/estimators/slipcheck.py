@@ -49,6 +49,12 @@ GYRO_MAX_SHARE = 0.5
 GYRO_FOLLOW = 0.6
 #: Wheel yaw rates [rad/s] above this count as turns for the ratio.
 TURN = 0.3
+#: _scale_free's priors: the gyro-to-wheels factor within this of its median
+#: ratio (track and common scale errors of a few percent, a skid-steer's
+#: scrub up to 2x), and the speed term [rad/m] (a left/right scale difference
+#: d turns at d v / track: 10 % on a 0.5 m track is 0.2)...
+FACTOR_SIGMA = 0.5
+SPEED_TERM_SIGMA = 0.3
 
 
 def slipping_stretches(meas, robot, t0: float, t1: float) -> list[tuple[float, float]]:
@@ -146,12 +152,25 @@ def _scale_free(g: np.ndarray, om: np.ndarray, v: np.ndarray) -> np.ndarray | No
     res = g - a0 * om
     res = res - np.median(res)
     X = np.stack([om, v, np.ones_like(om)], -1)
-    for _ in range(4):
+    # The floor of the kept residuals shrinks pass by pass: the first start
+    # (a0 om + bias) has no speed term, and a tight first cut left out every
+    # second whose speed differs from the bulk's (a log mostly circling at
+    # 0.35 m/s lost its 1.5 m/s straights, whose 0.13 rad/s is a left/right
+    # scale difference, and read them as slip).
+    for floor in (0.2, 0.1, 0.02, 0.02):
         mad = robust_sigma(res)
-        keep = np.abs(res) < max(3.0 * mad, 0.02)
+        keep = np.abs(res) < max(3.0 * mad, floor)
         if keep.sum() < 5:
             break
-        coef, *_ = np.linalg.lstsq(X[keep], g[keep], rcond=None)
+        # Anchored by priors (a at a0 within FACTOR_SIGMA, c at 0 within
+        # SPEED_TERM_SIGMA): a log that mostly circles at one (om, v) makes
+        # the three regressors collinear, and the free fit then followed the
+        # circle and left every other second off it (a probe's clean
+        # robot circling at 0.35 m/s: its whole calibration window "slipped").
+        w = 1.0 / max(mad, 0.01)
+        A = np.vstack([X[keep] * w, [[1.0 / FACTOR_SIGMA, 0.0, 0.0], [0.0, 1.0 / SPEED_TERM_SIGMA, 0.0]]])
+        b = np.concatenate([g[keep] * w, [a0 / FACTOR_SIGMA, 0.0]])
+        coef, *_ = np.linalg.lstsq(A, b, rcond=None)
         res = g - X @ coef
         if np.ptp(om[keep]) > 2 * TURN and not 0.5 < coef[0] < 2.0:
             return None                  # the gyro's rate is no scale error away from the wheels'
@@ -183,7 +202,11 @@ def fix_stretches(meas, robot, t0: float, t1: float) -> list[tuple[float, float]
     from numpy.lib.stride_tricks import sliding_window_view
     rate = (len(ft) - 1) / max(ft[-1] - ft[0], 1e-9)
     h = max(1, int(round(SMOOTH * rate)))
-    pad = lambda x: np.concatenate([np.repeat(x[:1], h, 0), x, np.repeat(x[-1:], h, 0)])
+    h = min(h, len(ft) - 1)
+    # Mirrored at the ends, not the end repeated: h copies of a wild first
+    # fix made it the median of the first windows (a probe's 10 m first fix
+    # was "slip inside the calibration window (0.1-1.5 s)").
+    pad = lambda x: np.concatenate([x[h:0:-1], x, x[-2:-h - 2:-1]])
     fm = np.median(sliding_window_view(pad(fp), 2 * h + 1, axis=0), -1)
     am = np.median(sliding_window_view(pad(antenna(ft)), 2 * h + 1, axis=0), -1)
     sm = 1.2533 * fs / np.sqrt(2 * h + 1)            # the median's sigma
@@ -199,7 +222,7 @@ def fix_stretches(meas, robot, t0: float, t1: float) -> list[tuple[float, float]
     # Median over neighbouring pairs: one outlying fix cannot flag a stretch.
     if bad.size >= 5:
         from numpy.lib.stride_tricks import sliding_window_view
-        bad = np.median(sliding_window_view(np.pad(bad.astype(float), 2, mode="edge"), 5), 1) > 0.5
+        bad = np.median(sliding_window_view(np.pad(bad.astype(float), 2, mode="reflect"), 5), 1) > 0.5
     out: list[tuple[float, float]] = []
     for a, b, flag in zip(ft[i], ft[j], bad):
         if not flag:

@@ -1111,8 +1111,10 @@ def _said_missing(role: str, msgtype: str, sensor: str, got: bool, topic: str | 
 
 #: A gyro's yaw rate between these multiples of the wheels' turn rate (with a
 #: clear correlation) is in degrees per second (57.3x) read as rad/s, give or
-#: take the wheels' scale (a probe: 57x imported without a word).
-DEG_RATIO = (40.0, 80.0)
+#: take the wheels' scale (a probe: 57x imported without a word) and a
+#: skid-steer's scrub (its wheels turn up to 2-3x the robot: 57.3 / 2.2 = 26),
+#: as analysis.mounting.DEGREES_RATIO, by which estimate refuses the log.
+DEG_RATIO = (15.0, 90.0)
 #: The correlation of a gyro's yaw rate with the wheels' turn rate that says
 #: clearly which way it turns (a probe's IMU mounted against /tf_static: -0.80).
 CLEAR_CORR = 0.5
