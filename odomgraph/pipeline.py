@@ -344,6 +344,21 @@ def _estimate_checked(log: Log, method: Method, schedule: Schedule, progress, op
         if found:
             raise EstimatorDivergedError(f"{exc}; the log shows why: {'; '.join(found)}") from exc
         raise
+    bias_walk = None
+    if fit_noise and log.gyro is not None and _has_reference(log):
+        # The gyro bias wandering far faster than [process] gyro_bias lets the
+        # estimate follow (a gyro warming up: the EKF held 81 % of its headings
+        # outside 3 sigma, status ok): the walk widened as much, and run again.
+        # Only with an absolute reference: without one the bias is the gyro's
+        # difference from the wheels, whose own model errors (a skid-steer's
+        # scrub) would pass for drift.
+        from odomgraph.analysis.noise import BIAS_WIDEN_ABOVE, bias_walk_scale
+        q = log.robot.process.gyro_bias
+        f = bias_walk_scale(est, q)
+        if f is not None and f > BIAS_WIDEN_ABOVE:
+            log = log.with_(robot=log.robot.with_(process=replace(log.robot.process, gyro_bias=q * f)))
+            est, options = run(schedule, options)
+            bias_walk = (f, bias_walk_scale(est, q * f))
     if retried is not None:
         est.warnings.insert(0, retried)
         est.flags.append(retried)
@@ -378,7 +393,27 @@ def _estimate_checked(log: Log, method: Method, schedule: Schedule, progress, op
     est.flags += suspect
     _note_motion_scales(est, log, motion)
     _note_row_scales(est, log, rows)
+    if bias_walk is not None:
+        _note_bias_walk(est, log, *bias_walk)
     return est
+
+
+def _note_bias_walk(est: Estimate, log: Log, f: float, again: float | None) -> None:
+    """Record the gyro-bias walk widened ``f`` times (analysis.noise.
+    bias_walk_scale; ``log``: widened) in ``est.noise_scales["gyro_bias"]``,
+    with a warning; flagged when the widened run's bias still wanders past
+    the threshold (``again``, in units of the widened walk)."""
+    from odomgraph.analysis.noise import BIAS_WIDEN_ABOVE
+    q = log.robot.process.gyro_bias
+    est.noise_scales["gyro_bias"] = {"measured": f, "applied": f}
+    est.warnings.append(f"[process] gyro_bias: the estimated gyro bias wanders {f:.2g}x faster than robot.toml's "
+                        f"{q / f:.3g} (rad/s)/sqrt(s) allows (a gyro warming up, or a bias that steps): it was "
+                        f"widened to {q:.3g} for this run (calibrate writes it back)")
+    if again is not None and again > BIAS_WIDEN_ABOVE:
+        line = (f"[process] gyro_bias: widened {f:.2g}x, the gyro bias still wanders {again:.2g}x faster than the "
+                "walk allows: the headings' sigma understate their error")
+        est.warnings.append(line)
+        est.flags.append(line)
 
 
 class _Nominal:
@@ -1274,7 +1309,8 @@ def _with_fitted_noise(robot, est: Estimate, warnings: list, per_fix_gps: bool =
     """The robot with each GPS/range sigma widened by the scale the data asked
     for (pipeline._with_noise_scales), the wheel speeds' [encoders] sigma
     and the gyro's (_note_row_scales), and each velocity random-walk intensity ([process]
-    accel, yaw_accel; _note_motion_scales): calibrate writes them back.
+    accel, yaw_accel; _note_motion_scales) and the gyro-bias walk ([process]
+    gyro_bias; _note_bias_walk): calibrate writes them back.
     ``per_fix_gps``: gps.csv has its own sigma column, which robot.toml's gps
     sigma does not stand for (LOG_FORMAT), so that one is left as it is; so
     is a sigma a filter widened from its predictions (analysis.noise.
@@ -1295,7 +1331,7 @@ def _with_fitted_noise(robot, est: Estimate, warnings: list, per_fix_gps: bool =
     robot = with_row_sigmas(robot, {k: est.noise_scales.get(k, {}).get("applied", 1.0) for k in ROW_WIDEN_ABOVE})
     from dataclasses import replace
     pn = robot.process
-    grown = {k: getattr(pn, k) * est.noise_scales[k]["applied"] for k in ("accel", "yaw_accel")
+    grown = {k: getattr(pn, k) * est.noise_scales[k]["applied"] for k in ("accel", "yaw_accel", "gyro_bias")
              if est.noise_scales.get(k, {}).get("applied", 1.0) > 1.0}
     return robot.with_(process=replace(pn, **grown)) if grown else robot
 
