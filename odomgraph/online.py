@@ -844,6 +844,7 @@ class Online:
             if self.smoother.watch is not None:
                 from odomgraph.estimators.heading import warning
                 warnings.append(warning(self.smoother.watch.t_known, self.smoother.watch))
+        warnings += self._pinned_lines()
         for k, v in self._nis.items():
             line = nis_warning(k, v[0], v[1], v[2])
             if line:
@@ -861,6 +862,21 @@ class Online:
                 "mean_nis": {k: {"mean": v[0] / v[1], "dof": v[2], "n": v[1]} for k, v in self._nis.items() if v[1]},
                 "warnings": warnings, "flags": self.flags(),
                 "notes": list(self.notes), "warmup_s": self.warmup, "latency_s": self.latency}
+
+    def _pinned_lines(self) -> list[str]:
+        """A line per scale combination the warm-up did not determine: held at
+        nominal for the whole stream, its rows carrying the prior sigma (a
+        probe's isam2 stream of a slow snowplow that drove straight through
+        its warm-up gave the track scale at nominal, silently; estimate says
+        the same of a whole log, pipeline.warnings_of)."""
+        init = (self.ekf.init if self.ekf is not None
+                else self.smoother.runner.prob.init if self.smoother is not None else None)
+        obs = None if init is None else init.observability
+        if obs is None:
+            return []
+        return [f"{name} is not determined by the warm-up's first {self.warmup:.0f} s (held at nominal for the whole "
+                f"stream, reported with its prior sigma): {reason}; a --warmup that holds straight driving and "
+                "turns, or calibrate first, determines it" for name, reason in obs.unobservable.items()]
 
     # ------------------------------------------------------ checkpoints
     def save(self, path: Path | str) -> None:

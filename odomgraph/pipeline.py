@@ -632,9 +632,11 @@ def _estimate_once(log: Log, method: Method, schedule: Schedule, progress, optio
         if weak and "pin" not in options:
             est = _run(log, method, schedule, None, {**options, "pin": tuple(weak.items())})
         return est
-    except (RuntimeError, ArithmeticError, __import__("numpy").linalg.LinAlgError) as exc:
+    except (RuntimeError, ArithmeticError, __import__("numpy").linalg.LinAlgError, ValueError) as exc:
         # GTSAM's IndeterminateSystemException and LAPACK failures: the log
-        # does not constrain the problem well enough for this solver.
+        # does not constrain the problem well enough for this solver. (gtsam's
+        # Python wrapper raises some of its own errors as ValueError: the
+        # fixed-lag smoother's "Asking to remove variables ... not unused".)
         from odomgraph.errors import EstimatorDivergedError
         first = next((ln.strip() for ln in str(exc).splitlines() if ln.strip()), type(exc).__name__)
         raise EstimatorDivergedError(f"{method.value}: the solver failed ({first})") from exc
@@ -829,7 +831,8 @@ def warnings_of(est: Estimate, log: Log | None = None) -> list[str]:
     if "scale_common" in pinned and len(pinned) < 3:
         rest = [n for n in ("scale_ratio", "scale_track") if n not in unobs]
         if rest:
-            out.append(f"{' and '.join(rest)} are estimated relative to the nominal common wheel scale "
+            out.append(f"{' and '.join(rest)} {'is' if len(rest) == 1 else 'are'} estimated relative to the nominal "
+                       "common wheel scale "
                        "(summary.json scale_combinations)")
     return out
 

@@ -341,6 +341,28 @@ def test_fixed_lag_streams_a_log_that_cannot_determine_a_scale_combination():
     _assert_rows_equal(_stream(log, sch, method="fixed-lag")[1], est)
 
 
+@pytest.mark.parametrize("method", ["isam2", "ekf", "fixed-lag"])
+def test_a_combination_the_warm_up_cannot_determine_keeps_its_prior_sigma_and_is_said(method):
+    """A warm-up that drives straight cannot determine the track: the stream
+    holds it at nominal for good. isam2's rows gave the hold's own 1e-4 as
+    its sigma (a probe's slow snowplow: z -248 on every row, nothing said);
+    every method's rows now carry the prior sigma, and the summary says why."""
+    from odomgraph.sim.scenarios import Segment
+    base = yard(90.0)
+    # (wheels of one scale: unequal ones "turn" driving straight, to the wheels' count)
+    sc = base.with_(prologue=(Segment(1.0, 0.0, 0.0), Segment(30.0, 0.6, 0.0)), slips=(), scales=(1.02, 1.02, 1.05))
+    log = simulate(sc, 61)
+    live, rows = _stream(log, Schedule(calibrate_until=20.0), method=method)
+    prior = log.robot.process.initial_scale_sigma
+    late = [r for r in rows if r.t > 40.0]
+    assert len(late) > 50
+    for r in late:
+        assert 0.6 * prior < r.sigma[10] < 1.05 * prior, (r.t, r.sigma[10])        # (the pinned combination's share)
+        assert abs(r.mean[10] - sc.scales[2]) < 3.0 * r.sigma[10]
+    said = [w for w in live.summary()["warnings"] if w.startswith("scale_track is not determined by the warm-up's")]
+    assert len(said) == 1, live.summary()["warnings"]
+
+
 def test_a_stray_future_stamp_is_rejected_and_the_stream_goes_on():
     log = simulate(paper(60), 18)
     sch = Schedule(calibrate_until=20.0)

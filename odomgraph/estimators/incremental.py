@@ -955,16 +955,31 @@ class ISAM2Runner(_Runner):
         row[0:2], row[2] = p[0:2], wrap_angle(p[2])
         row[3:] = self.W[k - 1]
         self.online[k] = row
-        Px = isam.marginalCovariance(X_KEY(k - 1))
-        Pw = isam.marginalCovariance(W_KEY(k - 1))
-        Ps = isam.marginalCovariance(S_KEY(k - 1))
-        # pose at the midpoint: arc Jacobian on X (body) and (v, omega); cross terms ignored
+        # pose at the midpoint: arc Jacobian on X (body) and (v, omega)
         Jx = pose2.to_body(Jf[:, 0:3], self.pose[k - 1, 2])
         Jv = Jf[:, St.VEL_S]
-        Pp = Jx @ Px @ Jx.T + Jv @ Pw[0:2, 0:2] @ Jv.T
-        self.online_sigma[k, 0:3] = np.sqrt(np.maximum(np.diag(Pp), 0))
-        self.online_sigma[k, [3, 4, 5, 8, 9, 10]] = np.sqrt(np.maximum(np.diag(Pw), 0))
-        self.online_sigma[k, [6, 7]] = np.sqrt(np.maximum(np.diag(Ps), 0))
+        obs = self.prob.init.observability
+        if obs is not None and obs.unobservable:
+            # Pinned scale combinations: the prior uncertainty given back
+            # (batch.honest_blocks), which needs the joint block. The per-variable
+            # marginals gave the pin's own 1e-4 as the track scale's sigma (a
+            # probe's stream of a slow snowplow whose warm-up drove straight:
+            # z -248 on every row, silent).
+            from odomgraph.estimators.batch import honest_blocks
+            C = honest_blocks(self.prob, _to_block(_joint_marginal(isam, k - 1))[None])[0]
+            J = np.zeros((3, St.N))
+            J[:, 0:3], J[:, St.VEL_S] = Jx, Jv
+            self.online_sigma[k, 0:3] = np.sqrt(np.maximum(np.diag(J @ C @ J.T), 0))
+            self.online_sigma[k, 3:] = np.sqrt(np.maximum(np.diag(C)[3:], 0))
+        else:
+            Px = isam.marginalCovariance(X_KEY(k - 1))
+            Pw = isam.marginalCovariance(W_KEY(k - 1))
+            Ps = isam.marginalCovariance(S_KEY(k - 1))
+            # (cross terms ignored)
+            Pp = Jx @ Px @ Jx.T + Jv @ Pw[0:2, 0:2] @ Jv.T
+            self.online_sigma[k, 0:3] = np.sqrt(np.maximum(np.diag(Pp), 0))
+            self.online_sigma[k, [3, 4, 5, 8, 9, 10]] = np.sqrt(np.maximum(np.diag(Pw), 0))
+            self.online_sigma[k, [6, 7]] = np.sqrt(np.maximum(np.diag(Ps), 0))
         if not self._settled and self.online_sigma[k, 2] > SETTLE_HEADING:
             # A heading this unsure is past what a linearisation carries: the
             # row lies on a circle about the fix-pinned antenna, of the lever
@@ -1408,6 +1423,7 @@ class FixedLagRunner(_Runner):
         sig = float(np.sqrt(max(self.smoother.marginalCovariance(X_KEY(k))[2, 2], 0.0)))
         if sig < SETTLE_HEADING_DONE:
             self._settled = True
+            self._release_hold(k)
             self.settle_notes.append(
                 f"fixed-lag: the start's heading was uncertain (prior sigma "
                 f"{np.degrees(np.sqrt(self.prob.prior_cov[2, 2])):.0f} deg): the window held every keyframe until "
@@ -1420,11 +1436,29 @@ class FixedLagRunner(_Runner):
                 f"the window held every keyframe to the end, and the rows are a re-solve of the whole log")
         elif capped:
             self._settled = True
+            self._release_hold(k)
             self.settle_warnings.append(
                 f"fixed-lag: the start's heading was still uncertain (sigma {np.degrees(sig):.1f} deg; it counts as "
                 f"pinned below {np.degrees(SETTLE_HEADING_DONE):.1f} deg) when the window stopped holding at t={kf.t[k]:.1f} s "
                 f"({HOLD_CAP:g} s after the first fix or range): the rows after it rest on linearisations at a heading the data had not pinned "
                 "(an [initial] pose in robot.toml, or --method batch, avoids this)")
+
+    def _release_hold(self, k: int) -> None:
+        """The hold ended (pinned, or at HOLD_CAP): every held keyframe older
+        than the lag leaves now, from the estimate the settle just re-solved,
+        and the smoother restarts on the window (recover). Left to leave by
+        their filing times, they left in groups of every lag-th keyframe
+        (filed together at each lag), and gtsam's marginalisation of such
+        scattered keys failed ("Asking to remove variables from the variable
+        index that are not unused": a probe's 2.5-4 m consumer GPS held the
+        start 250-300 s, then fixed-lag stopped with a traceback). A hold
+        shorter than the lag has nothing to release."""
+        kf = self.prob.kf
+        j0 = int(np.searchsorted(kf.t, kf.t[k] - self.options.lag))
+        if j0 < 1 or j0 > k or self.done[:j0].all():
+            return
+        self.recover(k, j0)
+        self.filed_late = {}
 
     def end_hold(self) -> None:
         """The log ends: a start still held is re-solved once more, and its rows are that re-solve's."""
