@@ -674,8 +674,9 @@ def calibrate(
     output: Annotated[Path, typer.Option("--output", "-o", help="robot.toml to write (a fleet: a directory, "
                                                                  "with NAME.toml per log and fleet.csv).")]
     = Path("robot-calibrated.toml"),
-    method: Annotated[MethodName, typer.Option("--method", "-m", help="Estimator (a smoother; ekf works too).")] = \
-        MethodName.batch,
+    method: Annotated[MethodName, typer.Option(
+        "--method", "-m", help="Estimator (a smoother; ekf works too, with --calibrate-until SECONDS: it needs a "
+                               "slip-free window).")] = MethodName.batch,
     calibrate_until: Annotated[str, typer.Option(
         help="'none' (default): slip and scale together with a sparse slip prior; or seconds of "
              "slip-free driving at the start.")] = "none",

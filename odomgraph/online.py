@@ -65,7 +65,8 @@ from odomgraph.estimators.schedule import Schedule
 from odomgraph.estimators.sensors import DOF, SENSOR_NAMES, WHEEL, event_stream
 from odomgraph.estimators.slipcheck import in_stretches
 from odomgraph.io.csvtable import ORIGIN_ABOVE, ORIGIN_BELOW, split_stamps
-from odomgraph.io.log import MAX_COORD, MAX_RATE, MAX_SPEED, SENSOR_FILE, SENSOR_FILES, Gps, Log, Ranges, schedule_origin
+from odomgraph.io.log import (MAX_COORD, MAX_RATE, MAX_SPEED, SENSOR_FILE, SENSOR_FILES, Gps, Log, Ranges, schedule_origin,
+                              unwrapped_count)
 from odomgraph.io.stream import SENSOR_COLUMNS
 from odomgraph.io.robot import RobotConfig
 
@@ -406,6 +407,14 @@ class Online:
             raise StreamInputError(f"ranges: range must be >= 0, got {out[1]!r}")
         # read_log refuses a file with such a row (io.log.check_magnitudes); a
         # stream cannot stop for one line, so the line is skipped and said
+        if sensor == "encoders":
+            for i in (0, 1):
+                x, bits = unwrapped_count(out[i])
+                if bits is not None:
+                    # as read_log unwraps encoders.csv (io.log.unwrapped_ticks)
+                    self.alerts.append(f"encoders: a tick count of {out[i]:g} is a {bits}-bit counter's wrap-around; "
+                                       f"read as {x:g} (the differences were taken across the wrap)")
+                    out[i] = x
         limit = STREAM_LIMITS.get(sensor)
         if limit is not None:
             size = max(abs(v) for v in (out[1:2] if sensor == "ranges" else out[:2]))

@@ -356,6 +356,9 @@ def read_log(directory: Path | str) -> Log:
             raise LogFormatError(p, f"scale factors must be positive finite numbers, got {list(scales)}")
     warn = tuple(f"{name}: {int(n)} row(s) written twice (same stamp and values) were read once"
                  for name, n in dups.items() if n)
+    if read.get("encoders") is not None:
+        read["encoders"], wrapped = unwrapped_ticks(read["encoders"])
+        warn += tuple(wrapped)
     # A sensor file with a header and no rows is no sensor: said, as a missing
     # file is not (a probe's empty gps.csv ran as "no absolute sensor" unnamed).
     warn += tuple(f"{sf.file}: a header and no rows: the log has no {sf.name} measurements"
@@ -366,6 +369,45 @@ def read_log(directory: Path | str) -> Log:
               provenance=prov, t_origin=origin[0] if origin else 0)
     check_log(log)
     return log
+
+
+#: Counter widths whose wrap-around a tick difference may carry.
+COUNTER_BITS = (16, 32)
+
+
+def unwrapped_count(x: float) -> tuple[float, int | None]:
+    """(x without a counter's wrap-around, the counter's bits or None): see unwrapped_ticks."""
+    for bits in COUNTER_BITS:
+        w = float(2 ** bits)
+        if abs(x) > 0.5 * w and abs(abs(x) - w) < 0.25 * w:
+            return x - np.sign(x) * w, bits
+    return x, None
+
+
+def unwrapped_ticks(e: Encoders) -> tuple[Encoders, list[str]]:
+    """``e`` with each tick count that is a counter's wrap-around (within a
+    quarter of 2^16 or 2^32 of it, beyond half of it: a difference of a
+    16-bit counter taken across its wrap, -65177 for +359) given back its
+    2^bits, and a line per wheel saying so; ``e`` itself and [] when there
+    is none. No wheel turns 2^15 ticks in one interval (at 20000 ticks/m and
+    50 Hz, 80 m/s); a probe's wrapped rows were only "rejected as outliers"."""
+    from dataclasses import replace as _replace
+    out, lines = {}, []
+    for side in ("left", "right"):
+        v = np.asarray(getattr(e, f"ticks_{side}"))
+        fixed = v.copy()
+        for bits in COUNTER_BITS:
+            w = float(2 ** bits)
+            hit = (np.abs(fixed) > 0.5 * w) & (np.abs(np.abs(fixed) - w) < 0.25 * w)
+            if hit.any():
+                fixed = np.where(hit, fixed - np.sign(fixed) * w, fixed).astype(v.dtype)
+                k = int(np.argmax(hit))
+                lines.append(f"encoders.csv: {int(hit.sum())} {side} tick count(s) are a {bits}-bit counter's "
+                             f"wrap-around, unwrapped (the first at t={float(e.t[k]):.3f} s: {v[k]:g}, read as "
+                             f"{fixed[k]:g}): the differences were taken across the wrap; fix the converter")
+        if lines and not np.array_equal(fixed, v):
+            out[f"ticks_{side}"] = fixed
+    return (_replace(e, **out) if out else e), lines
 
 
 def _truth_file(p: Path, read_table, origin: int, span: tuple[float, float] | None) -> Truth:
