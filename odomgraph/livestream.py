@@ -154,7 +154,7 @@ def summary_lines(online: Online, st: StreamStats) -> list[str]:
                       ("rejected_late", f"rejected, older than the {s['latency_s']:g} s latency window"),
                       ("repeated_stamps", "dropped, a stamp the sensor had sent already"),
                       ("rejected_ahead", "rejected, stamped far past the newest (a clock ahead?)"),
-                      ("rejected_impossible", "a speed no ground robot reaches, taken for a counter glitch")):
+                      ("impossible_rows", "a speed no ground robot reaches, taken for a counter glitch")):
         if s[key]:
             out.append(f"stream: {what}: {counts(s[key])}")
     if st.skipped_bad:

@@ -89,6 +89,8 @@ LATE_SAY = 5
 #: stamp (a driver's garbage, a sensor whose clock runs ahead) would else make
 #: every later measurement "late".
 MAX_AHEAD = 2.0
+#: Encoder rows past io.log.MAX_SPEED said one by one; the rest are counted.
+SAY_IMPOSSIBLE = 5
 #: Per sensor, (limit, unit) of the values a line may hold (io.log.check_magnitudes's;
 #: the encoders' is a speed, checked once the row before is known: Online._impossible_ticks).
 STREAM_LIMITS = {"wheel_speeds": (MAX_SPEED, "m/s"), "gyro": (MAX_RATE, "rad/s"), "gps": (MAX_COORD, "m"),
@@ -407,14 +409,6 @@ class Online:
             raise StreamInputError(f"ranges: range must be >= 0, got {out[1]!r}")
         # read_log refuses a file with such a row (io.log.check_magnitudes); a
         # stream cannot stop for one line, so the line is skipped and said
-        if sensor == "encoders":
-            for i in (0, 1):
-                x, bits = unwrapped_count(out[i])
-                if bits is not None:
-                    # as read_log unwraps encoders.csv (io.log.unwrapped_ticks)
-                    self.alerts.append(f"encoders: a tick count of {out[i]:g} is a {bits}-bit counter's wrap-around; "
-                                       f"read as {x:g} (the differences were taken across the wrap)")
-                    out[i] = x
         limit = STREAM_LIMITS.get(sensor)
         if limit is not None:
             size = max(abs(v) for v in (out[1:2] if sensor == "ranges" else out[:2]))
@@ -442,6 +436,7 @@ class Online:
             if sensor == "gyro" and (self._gyro_top is None or abs(vals[0]) > abs(self._gyro_top[1][0])):
                 self._gyro_top = (t, vals)
             if sensor == "encoders" and len(rows) >= 2:
+                self._unwrap(rows)
                 self._say_impossible_ticks(rows)
             if sensor in ("encoders", "wheel_speeds"):
                 if sensor == "encoders" and len(rows) >= 2 and rows[-2][0] + 1e-9 < self.t_done \
@@ -455,6 +450,21 @@ class Online:
                     self.smoother.wheel_row(self._wheel_rows, t)
                 self._wheel_rows += 1
 
+    def _unwrap(self, rows: list) -> None:
+        """The encoder row just appended to ``rows`` without a counter's
+        wrap-around (io.log.unwrapped_count, as read_log unwraps
+        encoders.csv), said."""
+        (t0, _), (t, vals) = rows[-2], rows[-1]
+        fixed = list(vals)
+        for i, tpm in enumerate((self.robot.ticks_per_meter_left, self.robot.ticks_per_meter_right)):
+            y, bits = unwrapped_count(vals[i], tpm, t - t0)
+            if bits is not None:
+                fixed[i] = y
+                self.alerts.append(f"encoders: a tick count of {vals[i]:g} at t={t:.3f} s is a {bits}-bit "
+                                   f"counter's wrap-around; read as {y:g} (the differences were taken across it)")
+        if fixed != list(vals):
+            rows[-1] = (t, tuple(fixed))
+
     def _say_impossible_ticks(self, rows: list) -> None:
         """Count and say an encoder row (the last of ``rows``) that reads a
         wheel speed past io.log.MAX_SPEED over its interval, for which
@@ -466,7 +476,10 @@ class Online:
         tpm = min(self.robot.ticks_per_meter_left, self.robot.ticks_per_meter_right)
         speed = max(abs(vals[0]), abs(vals[1])) / (tpm * (t - t0))
         if speed > MAX_SPEED:
-            _Counts.add(self.counts.__dict__.setdefault("impossible", {}), "encoders")  # (older checkpoints lack it)
+            seen = self.counts.__dict__.setdefault("impossible", {})    # (older checkpoints lack it)
+            _Counts.add(seen, "encoders")
+            if seen["encoders"] > SAY_IMPOSSIBLE:
+                return                      # a broken counter: the count at the end says the rest
             self.alerts.append(f"encoders: the row at t={t:.3f} s reads a wheel speed of {speed:.4g} m/s, not a "
                                f"reading a ground robot gives (limit {MAX_SPEED:g}); taken for a counter glitch")
 
@@ -867,7 +880,7 @@ class Online:
                 "repeated_stamps": dict(c.repeated), "recoveries": list(eng.recoveries) if eng else [],
                 "departures": list(getattr(eng, "departures", [])),
                 "restarts": list(self.restarts), "rejected_ahead": dict(c.ahead),
-                "rejected_impossible": dict(getattr(c, "impossible", {})),
+                "impossible_rows": dict(getattr(c, "impossible", {})),
                 "mean_nis": {k: {"mean": v[0] / v[1], "dof": v[2], "n": v[1]} for k, v in self._nis.items() if v[1]},
                 "warnings": warnings, "flags": self.flags(),
                 "notes": list(self.notes), "warmup_s": self.warmup, "latency_s": self.latency}

@@ -311,6 +311,7 @@ def _estimate_checked(log: Log, method: Method, schedule: Schedule, progress, op
         return est, options
 
     retried = None
+    options0 = options
     try:
         try:
             est, options = run(schedule, options)
@@ -356,9 +357,19 @@ def _estimate_checked(log: Log, method: Method, schedule: Schedule, progress, op
         q = log.robot.process.gyro_bias
         f = bias_walk_scale(est, q)
         if f is not None and f > BIAS_WIDEN_ABOVE:
+            first, log0 = est, log
             log = log.with_(robot=log.robot.with_(process=replace(log.robot.process, gyro_bias=q * f)))
-            est, options = run(schedule, options)
-            bias_walk = (f, bias_walk_scale(est, q * f))
+            try:
+                est, _ = run(schedule, options0)
+                bias_walk = (f, bias_walk_scale(est, q * f))
+            except EstimatorDivergedError as exc:
+                # the first run stands, with what it left unmended said
+                est, log = first, log0
+                line = (f"[process] gyro_bias: the estimated gyro bias wanders {f:.2g}x faster than robot.toml's "
+                        f"{q:.3g} (rad/s)/sqrt(s) allows, and the run with it widened failed "
+                        f"({' '.join(str(exc).split())}): the headings' sigma understate their error")
+                est.warnings.append(line)
+                est.flags.append(line)
     if retried is not None:
         est.warnings.insert(0, retried)
         est.flags.append(retried)
@@ -632,11 +643,9 @@ def _estimate_once(log: Log, method: Method, schedule: Schedule, progress, optio
         if weak and "pin" not in options:
             est = _run(log, method, schedule, None, {**options, "pin": tuple(weak.items())})
         return est
-    except (RuntimeError, ArithmeticError, __import__("numpy").linalg.LinAlgError, ValueError) as exc:
+    except (RuntimeError, ArithmeticError, __import__("numpy").linalg.LinAlgError) as exc:
         # GTSAM's IndeterminateSystemException and LAPACK failures: the log
-        # does not constrain the problem well enough for this solver. (gtsam's
-        # Python wrapper raises some of its own errors as ValueError: the
-        # fixed-lag smoother's "Asking to remove variables ... not unused".)
+        # does not constrain the problem well enough for this solver.
         from odomgraph.errors import EstimatorDivergedError
         first = next((ln.strip() for ln in str(exc).splitlines() if ln.strip()), type(exc).__name__)
         raise EstimatorDivergedError(f"{method.value}: the solver failed ({first})") from exc

@@ -45,8 +45,24 @@ def test_a_wrapped_counter_is_read_back_exactly_and_said(tmp_path, make, bits, e
     assert said[0].startswith(f"encoders.csv: {n_left} left tick count(s) are a {bits}-bit counter's")
     assert said[1].startswith(f"encoders.csv: {n_right} right tick count(s) are a {bits}-bit counter's")
     # a clean log is left alone
-    same, lines = unwrapped_ticks(log.encoders)
+    same, lines = unwrapped_ticks(log.encoders, log.robot)
     assert same is log.encoders and lines == []
+
+
+@pytest.mark.parametrize("tpm,hz", [(520_000.0, 10.0), (50_000.0, 1.0)])
+def test_a_fine_encoder_s_big_counts_are_no_wrap(tpm, hz):
+    """A 4096-line quadrature encoder behind a 20:1 gearbox (520k ticks/m)
+    counts 52k ticks a 10 Hz row at 1 m/s, as a 1 Hz log at 50k ticks/m
+    does: within a quarter of 2^16, yet a wheel speed of 1 m/s, not a wrap."""
+    from odomgraph.io.log import Encoders
+    from odomgraph.io.robot import RobotConfig
+    t = np.arange(0.0, 20.0, 1.0 / hz)
+    ticks = np.round(tpm / hz * (1.0 + 0.05 * np.sin(t))).astype(np.int64)
+    ticks[0] = 0
+    e = Encoders(t, ticks, ticks.copy())
+    robot = RobotConfig(ticks_per_meter_left=tpm, ticks_per_meter_right=tpm, track_width=0.5)
+    same, lines = unwrapped_ticks(e, robot)
+    assert same is e and lines == [] and ticks.max() > 49152
 
 
 def test_a_stream_unwraps_each_line_and_says_it():

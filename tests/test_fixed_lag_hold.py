@@ -49,21 +49,33 @@ def test_a_hold_that_ends_leaves_no_keyframe_behind_the_lag(monkeypatch, make, s
 
 
 def test_a_solver_failure_inside_gtsam_is_one_line(tmp_path, monkeypatch):
-    """gtsam's Python wrapper raises some of its failures as ValueError; they
-    reach the user as one line and exit 1, not a traceback."""
+    """gtsam's Python wrapper raises its std::invalid_argument as ValueError
+    (the marginalisation failure above): the runner says it as a solver
+    failure, which reaches the user as one line and exit 1, not a traceback."""
     log = _weak_gps(paper, 40.0, 0.05, 3)
     d = write_log(log, tmp_path / "log")
-    calls = [0]
-    step = FixedLagRunner.step
 
-    def failing(self, k, factors, values):
-        calls[0] += 1
-        if k == 30:
-            raise ValueError("Asking to remove variables from the variable index that are not unused")
-        return step(self, k, factors, values)
-    monkeypatch.setattr(FixedLagRunner, "step", failing)
+    class Failing:
+        """The smoother, whose 30th update fails as gtsam's did."""
+        def __init__(self, inner):
+            self.inner, self.n = inner, 0
+
+        def update(self, *args):
+            self.n += 1
+            if self.n == 30:
+                raise ValueError("Asking to remove variables from the variable index that are not unused")
+            return self.inner.update(*args)
+
+        def __getattr__(self, name):
+            return getattr(self.inner, name)
+    start = FixedLagRunner.start
+
+    def failing_start(self, factors, values):
+        start(self, factors, values)
+        self.smoother = Failing(self.smoother)
+    monkeypatch.setattr(FixedLagRunner, "start", failing_start)
     r = CliRunner().invoke(app, ["estimate", str(d), "-o", str(tmp_path / "est"), "-m", "fixed-lag"])
     assert r.exit_code == 1, r.output
     errors = [ln for ln in r.output.splitlines() if ln.startswith("odomgraph: error:")]
-    assert len(errors) == 1 and "the solver failed (Asking to remove variables" in errors[0], r.output
+    assert len(errors) == 1 and "fixed-lag: the solver failed (Asking to remove variables" in errors[0], r.output
     assert "Traceback" not in r.output and not (tmp_path / "est").exists()

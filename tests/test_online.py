@@ -475,7 +475,7 @@ def test_an_encoder_row_no_robot_could_drive_is_said_and_counted(which, seed):
     said = [a for a in live.alerts if "not a reading a ground robot gives" in a]
     assert len(said) == 1 and said[0].startswith(f"encoders: the row at t={float(t):.3f} s reads a wheel speed of "), \
         live.alerts
-    assert live.summary()["rejected_impossible"] == {"encoders": 1}
+    assert live.summary()["impossible_rows"] == {"encoders": 1}
     _, clean_rows = _stream(log, sch)
     before = [r for r in rows if r.t < float(t) - 1.0]
     assert len(before) > 100

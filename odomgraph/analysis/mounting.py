@@ -140,20 +140,21 @@ def unit_refusal(log) -> str | None:
 
 
 #: The ratio of the gyro's fast turns to the wheels' [-] taken for degrees per
-#: second: 57.3 times a ratio of 0.35-1.5. A skid-steer's wheels "turn" up to
-#: 2-3x faster than the robot does (their sideways scrub; a probe's read 26x in
-#: deg/s); a ratio beyond 90 is no degree.
+#: second: 57.3 times a true ratio of 0.26-1.6. A skid-steer's wheels "turn"
+#: up to 2-4x faster than the robot does (their sideways scrub; a probe's read
+#: 26x in deg/s); a ratio beyond 90 is no degree.
 DEGREES_RATIO = (15.0, 90.0)
 
 
 def gyro_in_degrees(log) -> str | None:
-    """The line for a gyro that follows the wheels' turns 35-90 times over
-    (57.3: degrees per second read as rad/s), or None. Not a mounting
+    """The line for a gyro that follows the wheels' turns DEGREES_RATIO
+    (15-90) times over with a clear correlation (MIN_CORRELATION: the
+    refusal stops the run), or None; 57.3 is degrees per second read as rad/s. Not a mounting
     mistake to warn of but a unit to fix: pipeline.estimate refuses the log
     with it (a probe's deg/s gyro ran on with 11 warnings and wrote scale
     factors of 0.1)."""
     gyro_c, slope, _ = _gyro_against_wheels(log)
-    if gyro_c is not None and gyro_c > 0 and _is_degrees(slope):
+    if gyro_c is not None and gyro_c > MIN_CORRELATION and _is_degrees(slope):
         return _degrees_line(slope)
     return None
 

@@ -846,7 +846,7 @@ def _cov_whitener(cov: np.ndarray) -> np.ndarray:
 
 class ISAM2Runner(_Runner):
     method = "isam2"
-    per_keyframe = _Runner.per_keyframe + ("online", "online_sigma")
+    per_keyframe = _Runner.per_keyframe + ("online", "online_sigma", "heading_held")
 
     def start(self, factors, values):
         self.isam = gtsam.ISAM2(_params(self.options, reuse_slots=True))
@@ -857,6 +857,10 @@ class ISAM2Runner(_Runner):
         self.segments: list[dict] = []
         self.online = np.zeros((self.prob.kf.n, St.N))
         self.online_sigma = np.zeros((self.prob.kf.n, St.N))
+        # the causal heading sigma with pinned scale combinations held, as the
+        # solver has it: what the start's settling reads (online_sigma gives the
+        # pins' prior back, which no data shrink: a settle on it never ends)
+        self.heading_held = np.zeros(self.prob.kf.n)
         self._settled = float(np.sqrt(self.prob.prior_cov[2, 2])) <= SETTLE_HEADING
         self._settle_next, self.settles, self._settled_at = 0.0, 0, -1
         self.settle_warnings: list[str] = []
@@ -933,7 +937,7 @@ class ISAM2Runner(_Runner):
             self.recover(k, 0)
             self._settled_at = k
             self.settles += 1
-        if self.online_sigma[k, 2] < SETTLE_HEADING_DONE:
+        if self.heading_held[k] < SETTLE_HEADING_DONE:
             self._settled = True
         elif closing:
             self._settled = True                          # nothing left to settle
@@ -971,6 +975,8 @@ class ISAM2Runner(_Runner):
             J[:, 0:3], J[:, St.VEL_S] = Jx, Jv
             self.online_sigma[k, 0:3] = np.sqrt(np.maximum(np.diag(J @ C @ J.T), 0))
             self.online_sigma[k, 3:] = np.sqrt(np.maximum(np.diag(C)[3:], 0))
+            Px, Pw = isam.marginalCovariance(X_KEY(k - 1)), isam.marginalCovariance(W_KEY(k - 1))
+            self.heading_held[k] = float(np.sqrt(max((Jx @ Px @ Jx.T + Jv @ Pw[0:2, 0:2] @ Jv.T)[2, 2], 0.0)))
         else:
             Px = isam.marginalCovariance(X_KEY(k - 1))
             Pw = isam.marginalCovariance(W_KEY(k - 1))
@@ -980,7 +986,8 @@ class ISAM2Runner(_Runner):
             self.online_sigma[k, 0:3] = np.sqrt(np.maximum(np.diag(Pp), 0))
             self.online_sigma[k, [3, 4, 5, 8, 9, 10]] = np.sqrt(np.maximum(np.diag(Pw), 0))
             self.online_sigma[k, [6, 7]] = np.sqrt(np.maximum(np.diag(Ps), 0))
-        if not self._settled and self.online_sigma[k, 2] > SETTLE_HEADING:
+            self.heading_held[k] = self.online_sigma[k, 2]
+        if not self._settled and self.heading_held[k] > SETTLE_HEADING:
             # A heading this unsure is past what a linearisation carries: the
             # row lies on a circle about the fix-pinned antenna, of the lever
             # arm plus the interval's travel (the first row after a first fix
@@ -1255,7 +1262,13 @@ class FixedLagRunner(_Runner):
             t = float(self.prob.kf.t[k]) if stamp is None or k not in stamp else stamp[k]
             for key in (X_KEY(k), W_KEY(k), S_KEY(k)):
                 stamps.insert((key, t))
-        self.smoother.update(factors, values, stamps, list(remove))
+        try:
+            self.smoother.update(factors, values, stamps, list(remove))
+        except ValueError as exc:
+            # gtsam's Python wrapper raises its std::invalid_argument as
+            # ValueError ("Asking to remove variables from the variable index
+            # that are not unused"): a solver failure, said as one
+            raise EstimatorDivergedError(f"fixed-lag: the solver failed ({exc})") from exc
 
     def _harvest(self, k, est):
         """Record keyframe k's fixed-lag estimate (from ``est``) and marginals before it leaves the window."""
@@ -1446,7 +1459,7 @@ class FixedLagRunner(_Runner):
     def _release_hold(self, k: int) -> None:
         """The hold ended (pinned, or at HOLD_CAP): every held keyframe older
         than the lag leaves now, from the estimate the settle just re-solved,
-        and the smoother restarts on the window (recover). Left to leave by
+        and the smoother restarts at k (recover). Left to leave by
         their filing times, they left in groups of every lag-th keyframe
         (filed together at each lag), and gtsam's marginalisation of such
         scattered keys failed ("Asking to remove variables from the variable
@@ -1457,7 +1470,11 @@ class FixedLagRunner(_Runner):
         j0 = int(np.searchsorted(kf.t, kf.t[k] - self.options.lag))
         if j0 < 1 or j0 > k or self.done[:j0].all():
             return
-        self.recover(k, j0)
+        # Restarted at k itself, whose marginal already holds every factor so
+        # far: a restart at j0 < k would push the factors j0..k on top of a
+        # marginal that counts them. The keyframes of the last lag leave with
+        # the rest, smoothed as far as the data up to k go.
+        self.recover(k, k)
         self.filed_late = {}
 
     def end_hold(self) -> None:

@@ -357,7 +357,7 @@ def read_log(directory: Path | str) -> Log:
     warn = tuple(f"{name}: {int(n)} row(s) written twice (same stamp and values) were read once"
                  for name, n in dups.items() if n)
     if read.get("encoders") is not None:
-        read["encoders"], wrapped = unwrapped_ticks(read["encoders"])
+        read["encoders"], wrapped = unwrapped_ticks(read["encoders"], robot)
         warn += tuple(wrapped)
     # A sensor file with a header and no rows is no sensor: said, as a missing
     # file is not (a probe's empty gps.csv ran as "no absolute sensor" unnamed).
@@ -373,39 +373,52 @@ def read_log(directory: Path | str) -> Log:
 
 #: Counter widths whose wrap-around a tick difference may carry.
 COUNTER_BITS = (16, 32)
+#: A row faster than this [m/s] that is within a quarter of 2^bits of a
+#: counter's wrap-around, and slower than it unwrapped, is taken for one.
+WRAP_SPEED = 50.0
 
 
-def unwrapped_count(x: float) -> tuple[float, int | None]:
-    """(x without a counter's wrap-around, the counter's bits or None): see unwrapped_ticks."""
+def unwrapped_count(x: float, tpm: float, dt: float) -> tuple[float, int | None]:
+    """(ticks ``x`` of a row ``dt`` [s] long without a counter's wrap-around,
+    the counter's bits or None). A wrap-around is a count within a quarter of
+    2^bits of it, beyond half of it, that reads a wheel speed past WRAP_SPEED
+    at ``tpm`` ticks/m and one below it unwrapped: -65177 for +359 from a
+    16-bit counter differenced across its wrap. The speeds keep a fine
+    encoder's big counts (520k ticks/m at 10 Hz: 52k ticks a row at 1 m/s)."""
+    if not dt > 0:
+        return x, None
     for bits in COUNTER_BITS:
         w = float(2 ** bits)
         if abs(x) > 0.5 * w and abs(abs(x) - w) < 0.25 * w:
-            return x - np.sign(x) * w, bits
+            y = x - np.sign(x) * w
+            if abs(x) / (tpm * dt) > WRAP_SPEED > abs(y) / (tpm * dt):
+                return y, bits
     return x, None
 
 
-def unwrapped_ticks(e: Encoders) -> tuple[Encoders, list[str]]:
-    """``e`` with each tick count that is a counter's wrap-around (within a
-    quarter of 2^16 or 2^32 of it, beyond half of it: a difference of a
-    16-bit counter taken across its wrap, -65177 for +359) given back its
-    2^bits, and a line per wheel saying so; ``e`` itself and [] when there
-    is none. No wheel turns 2^15 ticks in one interval (at 20000 ticks/m and
-    50 Hz, 80 m/s); a probe's wrapped rows were only "rejected as outliers"."""
+def unwrapped_ticks(e: Encoders, robot) -> tuple[Encoders, list[str]]:
+    """``e`` with each tick count that is a counter's wrap-around
+    (unwrapped_count) given back its 2^bits, and a line per wheel saying so;
+    ``e`` itself and [] when there is none (a probe's wrapped rows were only
+    "rejected as outliers", their ticks lost). The first row, whose ticks
+    the format does not count, is left as it is."""
     from dataclasses import replace as _replace
     out, lines = {}, []
-    for side in ("left", "right"):
+    dt = np.diff(e.t)
+    for side, tpm in (("left", robot.ticks_per_meter_left), ("right", robot.ticks_per_meter_right)):
         v = np.asarray(getattr(e, f"ticks_{side}"))
-        fixed = v.copy()
-        for bits in COUNTER_BITS:
-            w = float(2 ** bits)
-            hit = (np.abs(fixed) > 0.5 * w) & (np.abs(np.abs(fixed) - w) < 0.25 * w)
-            if hit.any():
-                fixed = np.where(hit, fixed - np.sign(fixed) * w, fixed).astype(v.dtype)
-                k = int(np.argmax(hit))
-                lines.append(f"encoders.csv: {int(hit.sum())} {side} tick count(s) are a {bits}-bit counter's "
-                             f"wrap-around, unwrapped (the first at t={float(e.t[k]):.3f} s: {v[k]:g}, read as "
-                             f"{fixed[k]:g}): the differences were taken across the wrap; fix the converter")
-        if lines and not np.array_equal(fixed, v):
+        fixed, bits = v.copy(), {}
+        for i in np.flatnonzero(np.abs(v[1:]) > 0.5 * 2 ** COUNTER_BITS[0]) + 1:
+            y, b = unwrapped_count(float(v[i]), tpm, float(dt[i - 1]))
+            if b is not None:
+                fixed[i] = y
+                bits.setdefault(b, []).append(int(i))
+        for b, rows in bits.items():
+            k = rows[0]
+            lines.append(f"encoders.csv: {len(rows)} {side} tick count(s) are a {b}-bit counter's wrap-around, "
+                         f"unwrapped (the first at t={float(e.t[k]):.3f} s: {v[k]:g}, read as {fixed[k]:g}): the "
+                         "differences were taken across the wrap; fix the converter")
+        if bits:
             out[f"ticks_{side}"] = fixed
     return (_replace(e, **out) if out else e), lines
 
