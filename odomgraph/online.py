@@ -92,7 +92,7 @@ MAX_AHEAD = 2.0
 #: Encoder rows past io.log.MAX_SPEED said one by one; the rest are counted.
 SAY_IMPOSSIBLE = 5
 #: Per sensor, (limit, unit) of the values a line may hold (io.log.check_magnitudes's;
-#: the encoders' is a speed, checked once the row before is known: Online._impossible_ticks).
+#: the encoders' is a speed, checked once the row before is known: Online._say_impossible_ticks).
 STREAM_LIMITS = {"wheel_speeds": (MAX_SPEED, "m/s"), "gyro": (MAX_RATE, "rad/s"), "gps": (MAX_COORD, "m"),
                  "ranges": (MAX_COORD, "m"), "velocity": (MAX_SPEED, "m/s (or rad/s)")}
 #: Measurements from that far ahead that confirm a new time: from two sensors,

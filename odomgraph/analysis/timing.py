@@ -468,7 +468,7 @@ def gps_offset_warnings(log, est) -> list[str]:
         sigma = getattr(est, "sigma", None)
         if (scales is k and sigma is not None and j is not None
                 and (j.offset.significant or any(j.lever_off(i) for i in (0, 1)))):
-            # (only where a line would be said: three more fits)
+            # (only where a line would be said: three more fits each for j and held)
             j = _with_scale_uncertainty(log, j, k, sigma[-1, S.SCALE])
             held = None if held is None else _with_scale_uncertainty(log, held, k, sigma[-1, S.SCALE], True)
         out = _offset_lines(parts, j, log.robot.gps_lever_arm, held)
