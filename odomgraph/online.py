@@ -748,6 +748,10 @@ class Online:
             out.append(revision_line(f"{self.method.value} (stream)", *self._revised))
         if self.final is not None:
             out += [f for f in self.final.flags if f not in out]
+        if self.ekf is not None:
+            # a stop the fixes contradicted: the wheels read nothing while the robot moved
+            from odomgraph.estimators.standstill import moved_flags
+            out += [f for f in moved_flags(list(self.ekf.init.warnings) + self.ekf.still_watch.notes) if f not in out]
         return out
 
     def _schedule_origin(self) -> float | None:
@@ -860,6 +864,8 @@ class Online:
         warnings = []
         if self.ekf is not None:
             warnings = list(self.ekf.init.warnings) + list(self.ekf.window_warnings) + self.ekf.heading_warnings()
+            # the stops after the warm-up that the other sensors contradicted (standstill.StillWatch)
+            warnings += [w for w in self.ekf.still_watch.notes if w not in warnings]
         elif self.smoother is not None:
             warnings = list(self.smoother.runner.prob.init.warnings) + list(
                 getattr(self.smoother.runner, "settle_warnings", []))

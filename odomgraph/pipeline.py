@@ -379,6 +379,7 @@ def _estimate_checked(log: Log, method: Method, schedule: Schedule, progress, op
     from odomgraph.analysis.pathscale import path_scale_warnings
     from odomgraph.observability import few_beacons_warnings
     from odomgraph.analysis.plausible import reversed_motion_warnings, skid_warnings, window_transfer_warnings
+    from odomgraph.estimators.standstill import moved_flags
     skid = skid_warnings(est, log.robot.track_width) if _has_reference(log) else []
     # (a wheel's skid says the same of the window, louder: one line a wheel is enough)
     transfer = [w for w in (window_transfer_warnings(est, log.robot.track_width, _absolute_times(log))
@@ -388,7 +389,8 @@ def _estimate_checked(log: Log, method: Method, schedule: Schedule, progress, op
     suspect = (_prior_warnings(est, log) + mounting_warnings(log) + dead_encoder_warnings(log)
                + reversed_motion_warnings(est, log.robot.track_width) + skid + transfer
                + path_scale_warnings(est, log)
-               + few_beacons_warnings(log, est.warnings))
+               + few_beacons_warnings(log, est.warnings)
+               + moved_flags(est.warnings))
     if log.gps is not None and not est.time_offsets:
         from odomgraph.analysis.timing import gps_offset_warnings
         suspect += gps_offset_warnings(log, est)

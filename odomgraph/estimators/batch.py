@@ -33,6 +33,7 @@ from odomgraph.estimators.keyframes import build_keyframes
 from odomgraph.estimators.measurements import clean, from_log, slip_intensity, yaw_rate_sensed
 from odomgraph.observability import decondition
 from odomgraph.estimators.slipcheck import in_stretches, in_window
+from odomgraph.estimators.standstill import still_intervals
 from odomgraph.result import Estimate
 from odomgraph.estimators.schedule import Schedule
 from odomgraph.io.log import Log
@@ -118,7 +119,11 @@ def build_problem(log: Log, schedule: Schedule, options: GraphOptions, causal: b
     p, _ = propagate(mean[0], mean[1], mean[2], mean[3], mean[4], kf.t[0] - init.t)
     mean[0:3] = p
     cov = init.P.copy()
-    zero = zero_slip_intervals(kf.t, init, meas.t_start, schedule)
+    # The standstills (estimators.standstill) as batch sees them, whole; the
+    # causal smoothers' graph reads no data after an interval's end, and a
+    # stretch is known still only with hindsight (the EKF's StillWatch is causal).
+    still = still_intervals(kf.t, init.still) if not causal else np.zeros(len(kf.t) - 1, bool)
+    zero = zero_slip_intervals(kf.t, init, meas.t_start, schedule) | still
     robust = options.slip_cauchy
     # batch's own graph options; isam2's and fixed-lag's graph has none of them
     own = options if isinstance(options, BatchGraphOptions) else BatchGraphOptions(slip_step_k=math.inf)
@@ -133,7 +138,7 @@ def build_problem(log: Log, schedule: Schedule, options: GraphOptions, causal: b
     return Problem(kf, log.robot, mean, cov, zero, robust, slip_intensity(log.robot.process, meas, sensed), loss,
                    options.robust_k, own.range_bias_sigma if own.range_bias else None,
                    own.velocity_loss, slip_step_k=step_k, init=init,
-                   spikes=dict(meas.spikes), meas=meas)
+                   spikes=dict(meas.spikes), meas=meas, still=still if still.any() else None)
 
 
 def zero_slip_intervals(t: np.ndarray, init, t_start: float, schedule: Schedule) -> np.ndarray:

@@ -38,6 +38,7 @@ from odomgraph.estimators.measurements import (PAUSE_PATH_SHARE, PAUSE_S, PAUSE_
                                                 slip_intensity)
 from odomgraph.observability import decondition, held_pins
 from odomgraph.estimators.slipcheck import in_stretches, in_window
+from odomgraph.estimators.standstill import StillWatch
 from odomgraph.result import DEPARTURE_SAYS, Estimate, Innovations
 from odomgraph.estimators.schedule import Hold, Schedule
 from odomgraph.io.log import Log
@@ -413,6 +414,8 @@ class EKF:
         state.setdefault("_anchor_until", (-1, -np.inf))
         state.setdefault("anchored", None)
         state.setdefault("_prev", {})     # nor the departures' watch
+        if "still_watch" not in state:        # nor the standstill's (it starts afresh)
+            state["still_watch"] = StillWatch(state["robot"])
         state.setdefault("last_departure", -np.inf)
         if "departures" not in state:         # older checkpoints kept them among the recoveries
             rec = state.get("recoveries", [])
@@ -637,6 +640,7 @@ class EKF:
         self._prev: dict[tuple, list] = {}    # (sensor, beacon) -> its last two measurements (_gated)
         self.last_departure = -np.inf         # time [s] the rate states were last widened (_departure)
         self.pauses, self.pause_travel = [], []
+        self.still_watch = StillWatch(r)      # (step: the slips held at zero while the robot stands still)
         obs = self.init.observability
         self._pinned = bool(obs.unobservable)
         self._held = held_pins(obs)   # (held_directions)
@@ -675,7 +679,9 @@ class EKF:
         (rate (1,) [rad/s]), GPS (antenna x, y (2,) [m], sigma [m]), range
         ((1,) [m], beacon x, y (2,) [m], beacon id) or velocity ((v, omega)
         (2,)). ``in_slip``: t lies where the wheels slipped inside the
-        calibration window (no zero-slip pseudo-update). Returns the NIS,
+        calibration window (no zero-slip pseudo-update). Where the robot
+        stands still (standstill.StillWatch, fed here) the slips are held at
+        zero as in the window. Returns the NIS,
         negative when the gate rejected it."""
         sch, opt = self.schedule, self.options
         # an encoder row whose ticks span more than a pause's length
@@ -685,6 +691,10 @@ class EKF:
             # began, stamped at its midpoint: a pause, as pause_spans would
             # have found had the log been known (a stream's is not).
             self.pause_spans = sorted({*self.pause_spans, (t - 0.5 * aux[1], t + 0.5 * aux[1])})
+        if code == WHEEL:
+            in_still = self.still_watch.wheel(t, z, aux[1] if len(aux) > 1 else 0.0)
+        else:
+            self.still_watch.other(code, t, z, aux)
         if self._anchor is not None and t >= self._anchor.t:
             self._take_anchor()
         self.predict(t)
@@ -713,11 +723,12 @@ class EKF:
             self.n_up += 1
             return float(DOF[WHEEL])      # no innovation: the NIS its expected value
         if code == WHEEL:
-            if ((self.switch_sigma is None and self.t_switch is not None and not in_slip)
-                    or not self.init.observability.slip_observable):
+            window = ((self.switch_sigma is None and self.t_switch is not None and not in_slip)
+                      or not self.init.observability.slip_observable)
+            if window or in_still:
                 h, H = pseudo.zero_slip(x[6], x[7])                              # eq. 35-36
                 self.update(np.zeros(2), h, H, SLIP_IDX, self._R_slip)
-            elif self.switch_sigma is not None and sch.hold is Hold.pseudo:
+            if not window and self.switch_sigma is not None and sch.hold is Hold.pseudo:
                 h, H = pseudo.hold_scale(x[8], x[9], x[10])                      # eq. 37-38
                 self.update(h.copy(), h, H, SCALE_IDX, self._R_scale)
             x = self.x  # the pseudo-update has moved the state

@@ -23,7 +23,8 @@ from odomgraph.factors.motion import propagate
 from odomgraph import state as S
 from odomgraph.errors import EstimatorDivergedError
 from odomgraph.estimators.ekf import (GATE_HISTORY, MAX_RECOVERIES, EKFOptions, departed, departure_note,
-                                      departure_possible, departure_widening, gate_thresholds, held_directions,
+                                      departure_possible, departure_widening, event_values, gate_thresholds,
+                                      held_directions,
                                       huber_widening, jumped, make_estimate, reacquire_widening, watch_widening)
 from odomgraph.estimators.sensors import (DOF, ENC_IDX, GATED, GPS, GYRO, GYRO_IDX, POSE_IDX, RANGE, SCALE_IDX,
                                          SENSOR_NAMES, SLIP_IDX, VEL, VEL_IDX, WHEEL, event_stream)
@@ -31,6 +32,7 @@ from odomgraph.estimators.initial import initial_state
 from odomgraph.estimators.measurements import from_log, slip_intensity
 from odomgraph.observability import decondition, held_pins
 from odomgraph.estimators.slipcheck import in_stretches, in_window
+from odomgraph.estimators.standstill import JITTER, StillWatch
 from odomgraph.result import Estimate
 from odomgraph.estimators.schedule import Hold, Schedule
 from odomgraph.io.log import Log
@@ -99,7 +101,8 @@ def run_ekf_many(logs: list[Log], schedule: Schedule = Schedule(), options: EKFO
     t_ev, code_ev, row_ev = streams[0]
     obs = inits[0].observability
     pins = held_pins(obs)          # (ekf.held_directions)
-    # As ekf.EKF, with the first run's slipping stretches (the runs share their motion).
+    # As ekf.EKF, with the first run's slipping stretches (the runs share their motion); each
+    # run's own standstill (StillWatch: its fixes may see a motion another run's do not).
     r, m0, sch, opt = logs[0].robot, meas[0], schedule, options
 
     # Measurements stacked over runs: (N, K, ...).
@@ -131,6 +134,8 @@ def run_ekf_many(logs: list[Log], schedule: Schedule = Schedule(), options: EKFO
     gates = gate_thresholds(opt)
     t_switch = sch.switch_time(m0.t_start)
     slip_ev = in_stretches(t_ev, in_window(schedule.slip_stretches(inits[0].slipping), m0.t_start, t_switch)[0])
+    watches = [StillWatch(r) for _ in range(n)]     # (fed each run's measurements, as ekf.EKF.step is)
+    tpm = np.array([r.ticks_per_meter_left, r.ticks_per_meter_right])
     switch_sigma = None
     holding = False
     rows = int(np.sum(code_ev == WHEEL))
@@ -170,9 +175,10 @@ def run_ekf_many(logs: list[Log], schedule: Schedule = Schedule(), options: EKFO
         hk = hist.get(key, [])
         return None if len(hk) < 3 else np.median(np.stack(hk), 0)
 
-    def update(z, h, H, idx, R, gate=None, ref=None, no_ref=None, no_gain=None, huber=False):
+    def update(z, h, H, idx, R, gate=None, ref=None, no_ref=None, no_gain=None, huber=False, skip=None):
         """Batched Kalman update (see EKF.update); returns (N,) NIS, negative where gated.
-        no_ref: (N,) runs that get no rescue from ``ref`` (held out after a jump)."""
+        no_ref: (N,) runs that get no rescue from ``ref`` (held out after a jump);
+        skip: (N,) runs the update leaves alone (zero gain: exactly no update)."""
         nonlocal x, P, last_y
         Ht = np.swapaxes(H, 1, 2)
         PHt = P[:, :, idx] @ Ht
@@ -192,6 +198,8 @@ def run_ekf_many(logs: list[Log], schedule: Schedule = Schedule(), options: EKFO
                 # a range taken at a Huber weight, its NIS the gate's (EKF.update)
                 R, Sinv = huber_widening(R, Sm, Sinv, np.where(rescued, nis, gate), gate)
         K = PHt @ Sinv
+        if skip is not None:
+            K[skip] = 0.0
         if gate is not None:
             K[rej] = 0.0
             nis = np.where(rej, -nis, nis)
@@ -217,6 +225,22 @@ def run_ekf_many(logs: list[Log], schedule: Schedule = Schedule(), options: EKFO
     with np.errstate(all="ignore"):  # frozen (diverged) runs may overflow; they are reset below
         for k in range(len(t_ev)):
             t, code, i = t_ev[k], code_ev[k], row_ev[k]
+            if code == WHEEL:
+                # (the runs share their stamps: a wheel row quiet in no run, with no
+                # run's watch in a quiet stretch, leaves every watch as it finds it)
+                dt_i = float(m0.wheel.dt[i]) if m0.wheel.dt is not None else 0.0
+                quiet = (np.abs(np.rint(wheel_m[:, i] * tpm * dt_i)) <= JITTER if dt_i
+                         else wheel_m[:, i] == 0.0)                          # (either wheel: its own run)
+                if quiet.any() or any(w.a is not None or w.qa != [None, None] for w in watches):
+                    still_k = np.array([w.wheel(t, wheel_m[j, i], dt_i) for j, w in enumerate(watches)])
+                else:
+                    still_k = None
+                    for w, fast in zip(watches, np.abs(wheel_m[:, i]).max(axis=1).tolist()):
+                        w.prev = (t, dt_i, fast)                    # (StillWatch.wheel's record of the row)
+            elif any(w.motion is not None for w in watches):
+                for j, w in enumerate(watches):
+                    ev = event_values(meas[j], code, i)
+                    w.other(code, t, ev[0], ev[1:])
             dt = t - t_now
             if dt > 0.0:
                 pose, J = propagate(x[:, 0], x[:, 1], x[:, 2], x[:, 3], x[:, 4], dt)
@@ -230,10 +254,11 @@ def run_ekf_many(logs: list[Log], schedule: Schedule = Schedule(), options: EKFO
                 switch_sigma = P[:, SCALE_IDX, SCALE_IDX].copy()
                 holding = sch.hold is Hold.consider
             if code == WHEEL:
-                if (switch_sigma is None and t_switch is not None and not slip_ev[k]) or not obs.slip_observable:
+                window = (switch_sigma is None and t_switch is not None and not slip_ev[k]) or not obs.slip_observable
+                if window or (still_k is not None and still_k.any()):
                     h, H = pseudo.zero_slip(x[:, 6], x[:, 7])                        # eq. 35-36
-                    update(np.zeros((n, 2)), h, H, SLIP_IDX, R_slip)
-                elif switch_sigma is not None and sch.hold is Hold.pseudo:
+                    update(np.zeros((n, 2)), h, H, SLIP_IDX, R_slip, skip=None if window else ~still_k)
+                if not window and switch_sigma is not None and sch.hold is Hold.pseudo:
                     h, H = pseudo.hold_scale(x[:, 8], x[:, 9], x[:, 10])             # eq. 37-38
                     update(h.copy(), h, H, SCALE_IDX, R_scale)
                 h, H = encoder.wheel_speeds(x[:, 3], x[:, 4], x[:, 6], x[:, 7], x[:, 8], x[:, 9], x[:, 10],

@@ -67,7 +67,8 @@ class Problem:
     prior_cov: np.ndarray
     """(11, 11) its covariance (pose block in the world frame)."""
     zero_slip: np.ndarray
-    """(N-1,) intervals forced to zero slip (the schedule's calibration window)."""
+    """(N-1,) intervals forced to zero slip (eq. 35-36): the schedule's
+    calibration window, and where the robot stood still (``still``)."""
     slip_robust: float | None = None
     """Cauchy scale [m/s] of a sparse zero-slip prior on the other intervals (None: none)."""
     q_slip: np.ndarray | None = None
@@ -97,6 +98,9 @@ class Problem:
     """The initialisation the prior came from (its observability and warnings)."""
     spikes: dict = None
     """Single-sample spikes the log's cleaning took out, per sensor (measurements.despike)."""
+    still: np.ndarray | None = None
+    """(N-1,) the zero_slip intervals in which the robot stood still
+    (estimators.standstill); None: none."""
 
     @property
     def wheel_speed_units(self) -> bool:
@@ -104,8 +108,10 @@ class Problem:
         calibration window. The window pins slip to zero and so anchors the
         scale factors; without one a scale factor can shrink towards zero to
         escape the priors (a slip-only schedule on the real libRSF log, as
-        first imported, took the track scale to 0)."""
-        return self.speed_ref is not None and bool(self.zero_slip.any())
+        first imported, took the track scale to 0). A standstill's zero slip
+        is no anchor: with the wheels still it says nothing of a scale."""
+        window = self.zero_slip if self.still is None else self.zero_slip & ~self.still
+        return self.speed_ref is not None and bool(window.any())
 
     def loss_k(self) -> float:
         """The robust threshold in sigmas now in force (robust_k, scaled by gnc_scale)."""

@@ -289,6 +289,9 @@ def warning(until: float, watch: HeadingWatch | None = None) -> str:
                 "fixes' trailing median, never moved 3 fix sigmas, at least 5 cm, from where it started); heading "
                 "sigma is pi, and x, y sigma include the circle the centre can lie on (the GPS lever arm's, or "
                 "the wheels' path's around the fixes' mean)")
-    return (f"heading not observable until t={until:.1f} s, when the robot first moved: before it, heading "
-            "sigma is pi and x, y sigma include the circle the centre can lie on (the lever arm's standing still, "
-            "the wheels' path's around the fixes' mean once it drove)")
+    # (not "when the robot first moved": under 3 m fixes the robot had driven
+    # for a minute by the time its path moved 3 fix sigmas; a probe's read t=67 s)
+    return (f"heading not observable until t={until:.1f} s, when the motion first showed it (the wheels' path, or "
+            "the fixes' trailing median, had moved 3 fix sigmas, at least 5 cm, from where it started): before it, "
+            "heading sigma is pi and x, y sigma include the circle the centre can lie on (the lever arm's standing "
+            "still, the wheels' path's around the fixes' mean once it drove)")

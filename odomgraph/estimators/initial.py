@@ -25,6 +25,7 @@ from odomgraph.errors import NotEnoughDataError
 from odomgraph.estimators.measurements import Measurements
 from odomgraph.observability import UNPLACED_BY_RANGES, Observability, prior_scale_cov, structure
 from odomgraph.estimators.slipcheck import slipping_stretches
+from odomgraph.estimators.standstill import still_stretches
 from odomgraph.io.robot import RobotConfig
 
 #: Multilateration window: each beacon's latest range within it is combined [s].
@@ -91,6 +92,9 @@ class InitialState:
     slipping: tuple[tuple[float, float], ...] = ()
     """Stretches [s] where the fixes contradict the wheels (slipcheck): no
     schedule may take them as slip-free."""
+    still: tuple[tuple[float, float], ...] = ()
+    """(start, end] stretches [s] in which the robot stood still (standstill):
+    every estimator holds the slips at zero there (eq. 35-36)."""
     heading_unknown: bool = False
     """The start's heading is unknown (the first fixes show no motion; sigma
     pi): until the motion shows it (estimators.heading), no estimator may
@@ -224,9 +228,10 @@ def initial_state(robot: RobotConfig, meas: Measurements, pin: dict[str, str] | 
         P[S.V, S.V] = (0.2 + 0.1 * abs(vw[k])) ** 2
         P[S.OMEGA, S.OMEGA] = (0.2 + 0.1 * abs(ww[k])) ** 2
         P[np.ix_(S.POSE, S.POSE)] = pose_cov
-        return InitialState(float(t0), x, P, note, obs, tuple(warnings) + extra,
-                            tuple(slipping_stretches(meas, robot, float(t0), float(tw[-1]))), heading_unknown,
-                            frame_free, anchor)
+        still, moved = still_stretches(meas, robot, float(t0), float(tw[-1]))
+        return InitialState(float(t0), x, P, note, obs, tuple(warnings) + extra + tuple(moved),
+                            tuple(slipping_stretches(meas, robot, float(t0), float(tw[-1]))), tuple(still),
+                            heading_unknown, frame_free, anchor)
 
     if robot.initial is not None:
         i = robot.initial
