@@ -93,8 +93,10 @@ class InitialState:
     """Stretches [s] where the fixes contradict the wheels (slipcheck): no
     schedule may take them as slip-free."""
     still: tuple[tuple[float, float], ...] = ()
-    """(start, end] stretches [s] in which the robot stood still (standstill):
-    every estimator holds the slips at zero there (eq. 35-36)."""
+    """[start, end] stretches [s] in which the robot stood still, seen whole
+    (standstill.still_stretches): batch holds the slips at zero there (eq.
+    35-36). The EKF decides the same causally (standstill.StillWatch);
+    isam2 and fixed-lag take none."""
     heading_unknown: bool = False
     """The start's heading is unknown (the first fixes show no motion; sigma
     pi): until the motion shows it (estimators.heading), no estimator may
