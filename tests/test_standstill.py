@@ -62,10 +62,11 @@ def _z(est, log, k):
 #: (scenario, seed, park [s], encoder rate [Hz], duration [s]). Before the
 #: standstill: batch headings 91 % and 97 % outside 3 sigma (z 31, 25) on
 #: the two 10 min parks, the EKF's 32 % (z 4.7) on the 4 min one.
-#: Each case runs the methods named (the suite's time: every method runs twice).
-PARKS = [(paper, 68, (60.0, 660.0), 50.0, 720.0, ("batch", "fixed-lag")),
+#: Each case runs the methods named (the suite's time: fixed-lag costs 16 s
+#: on a 12 min log; it takes no standstill, and is held to the third case).
+PARKS = [(paper, 68, (60.0, 660.0), 50.0, 720.0, ("batch",)),
          (yard, 69, (50.0, 650.0), 20.0, 700.0, ("batch", "ekf")),
-         (paper, 61, (50.0, 290.0), 20.0, 340.0, ("ekf", "isam2"))]
+         (paper, 61, (50.0, 290.0), 20.0, 340.0, ("ekf", "fixed-lag"))]
 
 
 @pytest.mark.parametrize("make,seed,park,enc_hz,duration,methods", PARKS)
