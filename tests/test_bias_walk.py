@@ -68,6 +68,7 @@ def test_a_steady_bias_and_the_simulators_walk_widen_nothing(make, seed):
         assert bias_walk_scale(est, log.robot.process.gyro_bias) < 0.5 * BIAS_WIDEN_ABOVE
 
 
+@pytest.mark.slow   # (46 s: a calibrate round trip; the yaw walk's write-back runs in test_noise_model)
 def test_a_walk_far_wider_than_robot_toml_s_is_measured_and_written_back(tmp_path):
     """The simulator's bias random walk at 15x robot.toml's intensity: the
     measure reads a factor near it (it errs low: an estimate follows the

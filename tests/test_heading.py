@@ -55,7 +55,7 @@ def test_standing_still_claims_no_heading(name, method):
 
 
 @pytest.mark.parametrize("method", METHODS)
-@pytest.mark.parametrize("heading", [0.7, -2.5])
+@pytest.mark.parametrize("heading", [0.7, pytest.param(-2.5, marks=pytest.mark.slow)])
 def test_a_wait_before_driving(method, heading):
     """35 s still, then the paper's manoeuvres: the start pose is fitted to
     the first motion's fixes and carried back over the wait (a start at

@@ -79,6 +79,7 @@ def test_process_noise_kept_unless_beaten_beyond_chance():
     assert not _beats((t[:2], base[:2] * 0.5), (t, base))
 
 
+@pytest.mark.slow   # (31 s; test_sparse_fixes_widening_is_not_written_back holds the claim on paper at 0.2 Hz)
 def test_sparse_fixes_calibrate_keeps_default_process_noise():
     """The EKF on every other 0.2 Hz fix is lost for every candidate (held-out
     errors of 7 m): calibrate wrote 40x the default for 6 % less, and said

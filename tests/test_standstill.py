@@ -65,7 +65,7 @@ def _z(est, log, k):
 #: Each case runs the methods named (the suite's time: fixed-lag costs 16 s
 #: on a 12 min log; it takes no standstill, and is held to the third case).
 PARKS = [(paper, 68, (60.0, 660.0), 50.0, 720.0, ("batch",)),
-         (yard, 69, (50.0, 650.0), 20.0, 700.0, ("batch", "ekf")),
+         pytest.param(yard, 69, (50.0, 650.0), 20.0, 700.0, ("batch", "ekf"), marks=pytest.mark.slow),
          (paper, 61, (50.0, 290.0), 20.0, 340.0, ("ekf", "fixed-lag"))]
 
 

@@ -37,7 +37,7 @@ def _slipping(name, seed, start, speed):
 
 
 @pytest.mark.parametrize("method", ["batch", "isam2"])
-@pytest.mark.parametrize("name,seed,start,speed", [pytest.param(*CASES[0], marks=pytest.mark.slow), *CASES[1:]])
+@pytest.mark.parametrize("name,seed,start,speed", [pytest.param(*c, marks=pytest.mark.slow) for c in CASES[:2]] + CASES[2:])
 def test_common_mode_slip_in_the_window_is_found_and_estimated(method, name, seed, start, speed):
     log = _slipping(name, seed, start, speed)
     est = estimate(log, method)
