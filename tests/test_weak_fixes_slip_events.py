@@ -1,0 +1,50 @@
+"""Weak fixes and one-wheel slip events (README, Known limitations: "Weak
+fixes and slip events: the smoothers' rows are overconfident").
+
+The yard scenario with consumer GNSS (0.5 m at 2 Hz) and its own slip
+events: the EKF's rows are within their sigma, batch's are not (49 % of
+them outside 3 sigma, position z 17, status ok, measured in the 24th
+session): its sparse slip prior on the joint slip norm shrinks a one-wheel
+slip's common mode, and the weak fixes do not pull it back. The batch case
+is a strict xfail: it passes, and so fails the suite, the day the smoother
+is mended; the README item goes then."""
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from odomgraph import state as S
+from odomgraph.estimators.schedule import Schedule
+from odomgraph.pipeline import estimate
+from odomgraph.sim.faults import Faults, inject
+from odomgraph.sim.scenarios import yard
+
+
+def _log():
+    sc = yard(180.0)
+    sc = sc.with_(robot=sc.robot.with_(gps_sigma=0.5), rates=replace(sc.rates, gps=2.0))
+    assert any(s.wheel == "right" and s.speed > 0 for s in sc.slips)   # (a one-wheel slip among its events)
+    return inject(sc, Faults(), 11)
+
+
+def _outside(est, log) -> float:
+    """Share of rows with x, y or heading more than 3 sigma off the truth."""
+    z = []
+    for k in (S.X, S.Y, S.THETA):
+        e = est.mean[:, k] - log.truth.at(S.NAMES[k], est.t)
+        if k == S.THETA:
+            e = np.angle(np.exp(1j * e))
+        z.append(np.abs(e) / est.sigma[:, k])
+    return float(np.mean(np.max(z, axis=0) > 3.0))
+
+
+def test_the_ekf_holds_its_sigma_through_the_slip_events():
+    log = _log()
+    assert _outside(estimate(log, "ekf", Schedule(20.0)), log) < 0.01
+
+
+@pytest.mark.xfail(strict=True, raises=AssertionError,
+                   reason="README Known limitations: weak fixes and slip events (joint-norm slip prior)")
+def test_batch_holds_its_sigma_through_the_slip_events():
+    log = _log()
+    assert _outside(estimate(log, "batch", Schedule(20.0)), log) < 0.05
