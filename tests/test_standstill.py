@@ -234,3 +234,29 @@ def test_the_filter_s_causal_watch_agrees_with_hindsight(make, seed, hz):
         expect |= (end >= a + MIN_STILL - 1e-9) & (end <= b + 1e-9)
     assert len(init.still) >= 1
     assert np.array_equal(np.isin(tw, still_t), expect)
+
+
+def test_a_calibration_window_parked_throughout_keeps_its_wheel_speed_units():
+    """Problem.wheel_speed_units means "a calibration window exists" (it
+    anchors the scale factors): a window in which the robot stood still
+    throughout is still the schedule's window, and a standstill outside it
+    adds none. zero_slip holds both, the window mask the schedule's alone."""
+    from odomgraph.estimators.batch import BatchGraphOptions, build_problem
+    sc, log = _parked(paper, 62, (0.0, 30.0), 20.0, 90.0)
+    prob = build_problem(log, Schedule(20.0), BatchGraphOptions())
+    mid = 0.5 * (prob.kf.t[:-1] + prob.kf.t[1:])
+    window = mid < prob.kf.t[0] + 20.0 - 1e-9
+    still = prob.zero_slip & ~prob.window
+    # the window is parked throughout: every window interval is zero slip, and still
+    # (zero_slip & ~still, the mask this once read, held no interval: no units)
+    assert prob.zero_slip[window].all() and prob.window is not None
+    held = still_intervals(prob.kf.t, prob.init.still)
+    assert held[window].all() and not (prob.zero_slip & ~held).any()
+    assert still[mid > 21.0].sum() > 0 and not still[mid > 31.0].any()
+    np.testing.assert_array_equal(prob.window[mid > 21.0], False)
+    ref = np.ones(3)                       # (batch sets its speed_ref from the initial guess)
+    assert replace(prob, speed_ref=ref).wheel_speed_units
+    # no calibration window (slip estimated throughout): the park alone gives no units
+    none = build_problem(log, Schedule(0.0), BatchGraphOptions())
+    assert none.zero_slip.any() and not none.window.any()
+    assert not replace(none, speed_ref=ref).wheel_speed_units

@@ -123,7 +123,8 @@ def build_problem(log: Log, schedule: Schedule, options: GraphOptions, causal: b
     # causal smoothers' graph reads no data after an interval's end, and a
     # stretch is known still only with hindsight (the EKF's StillWatch is causal).
     still = still_intervals(kf.t, init.still) if not causal else np.zeros(len(kf.t) - 1, bool)
-    zero = zero_slip_intervals(kf.t, init, meas.t_start, schedule) | still
+    window = zero_slip_intervals(kf.t, init, meas.t_start, schedule)
+    zero = window | still
     robust = options.slip_cauchy
     # batch's own graph options; isam2's and fixed-lag's graph has none of them
     own = options if isinstance(options, BatchGraphOptions) else BatchGraphOptions(slip_step_k=math.inf)
@@ -138,7 +139,7 @@ def build_problem(log: Log, schedule: Schedule, options: GraphOptions, causal: b
     return Problem(kf, log.robot, mean, cov, zero, robust, slip_intensity(log.robot.process, meas, sensed), loss,
                    options.robust_k, own.range_bias_sigma if own.range_bias else None,
                    own.velocity_loss, slip_step_k=step_k, init=init,
-                   spikes=dict(meas.spikes), meas=meas, still=still if still.any() else None)
+                   spikes=dict(meas.spikes), meas=meas, window=window if still.any() else None)
 
 
 def zero_slip_intervals(t: np.ndarray, init, t_start: float, schedule: Schedule) -> np.ndarray:

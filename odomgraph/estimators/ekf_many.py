@@ -231,13 +231,13 @@ def run_ekf_many(logs: list[Log], schedule: Schedule = Schedule(), options: EKFO
                 dt_i = float(m0.wheel.dt[i]) if m0.wheel.dt is not None else 0.0
                 quiet = (np.abs(np.rint(wheel_m[:, i] * tpm * dt_i)) <= JITTER if dt_i
                          else wheel_m[:, i] == 0.0)                          # (either wheel: its own run)
-                if quiet.any() or any(w.a is not None or w.qa != [None, None] for w in watches):
+                if quiet.any() or not all(w.idle() for w in watches):
                     still_k = np.array([w.wheel(t, wheel_m[j, i], dt_i) for j, w in enumerate(watches)])
                 else:
                     still_k = None
                     for w, fast in zip(watches, np.abs(wheel_m[:, i]).max(axis=1).tolist()):
-                        w.prev = (t, dt_i, fast)                    # (StillWatch.wheel's record of the row)
-            elif any(w.motion is not None for w in watches):
+                        w.pass_row(t, dt_i, fast)
+            elif any(w.watching() for w in watches):
                 for j, w in enumerate(watches):
                     ev = event_values(meas[j], code, i)
                     w.other(code, t, ev[0], ev[1:])

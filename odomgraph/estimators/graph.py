@@ -98,9 +98,9 @@ class Problem:
     """The initialisation the prior came from (its observability and warnings)."""
     spikes: dict = None
     """Single-sample spikes the log's cleaning took out, per sensor (measurements.despike)."""
-    still: np.ndarray | None = None
-    """(N-1,) the zero_slip intervals in which the robot stood still
-    (estimators.standstill); None: none."""
+    window: np.ndarray | None = None
+    """(N-1,) the schedule's calibration window alone, where zero_slip also
+    holds standstills (estimators.standstill); None: zero_slip is the window."""
 
     @property
     def wheel_speed_units(self) -> bool:
@@ -110,7 +110,7 @@ class Problem:
         escape the priors (a slip-only schedule on the real libRSF log, as
         first imported, took the track scale to 0). A standstill's zero slip
         is no anchor: with the wheels still it says nothing of a scale."""
-        window = self.zero_slip if self.still is None else self.zero_slip & ~self.still
+        window = self.zero_slip if self.window is None else self.window
         return self.speed_ref is not None and bool(window.any())
 
     def loss_k(self) -> float:

@@ -332,6 +332,22 @@ class StillWatch:
         self.b = t + 0.5 * dt
         return not self.run_bad and self.b - self.a >= MIN_STILL and self.motion.seen() is None
 
+    def idle(self) -> bool:
+        """Neither wheel in a quiet run and no still piece open: a row in
+        which neither wheel is quiet changes nothing here but ``prev``
+        (see pass_row)."""
+        return self.a is None and self.qa[0] is None and self.qa[1] is None
+
+    def pass_row(self, t: float, dt: float, fast: float) -> None:
+        """An idle watch's wheel row in which neither wheel is quiet: what
+        ``wheel`` would do with it, without its arithmetic (ekf_many's many
+        runs; ``fast`` is the faster wheel's |speed| [m/s])."""
+        self.prev = (t, dt, fast)
+
+    def watching(self) -> bool:
+        """A still piece is open: the other sensors' measurements are checked."""
+        return self.motion is not None
+
     def _end(self) -> None:
         """The current piece ends: say it if the other sensors contradicted it."""
         mo = self.motion
