@@ -14,6 +14,7 @@ also linear, where GTSAM's Marginals would query the Bayes tree key by key.
 """
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
 from dataclasses import dataclass
@@ -31,6 +32,8 @@ from odomgraph.estimators.graph import NB, SLIP_STEP_K, Linearization, Problem, 
 from odomgraph.estimators.initial import initial_state
 from odomgraph.estimators.keyframes import build_keyframes
 from odomgraph.estimators.measurements import clean, from_log, slip_intensity, yaw_rate_sensed
+from odomgraph.estimators.priorcheck import (CHECK_K, SLIP_SEEN, Verdict, informed, slip_after_window,
+                                              tangent_difference, verdict, widened)
 from odomgraph.observability import decondition
 from odomgraph.estimators.slipcheck import in_stretches, in_window
 from odomgraph.estimators.standstill import still_intervals
@@ -55,6 +58,13 @@ class GraphOptions:
     """Cauchy scale [m/s] of the sparse zero-slip prior outside the calibration
     window (the whole log with ``calibrate_until=None``). None: no prior there,
     slip is a free random walk after the window as in the EKF."""
+    slip_check: bool = True
+    """Where slip after the calibration window exceeds priorcheck.SLIP_SEEN,
+    solve again without the sparse slip prior there (check_slip_prior). batch
+    gives that solution where the two differ by more than priorcheck.CHECK_K
+    sigma; isam2 and fixed-lag, whose rows were given as they came, are
+    flagged there. Either way the rows' covariance is widened to hold both
+    means. False: the prior trusted unchecked."""
     pin: tuple[tuple[str, str], ...] = ()
     """(scale combination, reason) pairs to hold at nominal with their prior
     sigma, as if the log could not determine them (observability)."""
@@ -380,12 +390,15 @@ def retract(pose: np.ndarray, W: np.ndarray, d: np.ndarray):
     return np.stack([x, y, wrap_angle(th)], -1), W + d[:, 3:]
 
 
-def solve(prob: Problem, pose: np.ndarray, W: np.ndarray, options: SmootherOptions, progress=None):
+def solve(prob: Problem, pose: np.ndarray, W: np.ndarray, options: SmootherOptions, progress=None,
+          range_bias: np.ndarray | None = None, graduate: bool = True):
     """Gauss-Newton with a backtracking line search.
 
     Returns (pose, W, iterations, cost, range_bias, converged); range_bias
-    is None unless the problem estimates it; converged is False when the
-    iteration cap stopped it.
+    is None unless the problem estimates it (``range_bias``: its start,
+    zeros by default); converged is False when the iteration cap stopped it.
+    ``graduate=False``: no graduated non-convexity, for a start already at
+    the answer of a neighbouring problem (priorcheck).
 
     With a robust loss the threshold is graduated (GNC): it starts at
     2^GNC_STEPS times its target, so that every residual sits in the loss's
@@ -401,8 +414,8 @@ def solve(prob: Problem, pose: np.ndarray, W: np.ndarray, options: SmootherOptio
     """
     n, nb = prob.kf.n, prob.n_bias
     order = time_ordering(n, 1 if nb else 0)
-    rb = np.zeros(nb) if nb else None
-    gnc = prob.robust is not None
+    rb = (np.zeros(nb) if range_bias is None else np.array(range_bias, float)) if nb else None
+    gnc = prob.robust is not None and graduate
     prob.gnc_scale = 2.0**GNC_STEPS if gnc else 1.0
     lin = linearize(prob, pose, W, range_bias=rb)
     it = 0
@@ -683,20 +696,81 @@ def run_batch(log: Log, schedule: Schedule = Schedule(), options: SmootherOption
     if not (np.all(np.isfinite(pose)) and np.all(np.isfinite(W))):
         raise EstimatorDivergedError("batch smoother diverged: non-finite estimate")
     Sig = marginal_blocks(prob, pose, W, rb)
+    warnings, checked = [], ""
+    chk = check_slip_prior(prob, pose, W, rb, options)
+    if chk is not None:
+        iters += chk.iterations
+        checked = chk.note
+        if chk.verdict is None:
+            warnings.append(f"batch: {chk.note}")
+        elif chk.verdict.prior_free:
+            prob, pose, W, rb, cost, converged, Sig = chk.prob, chk.pose, chk.W, chk.rb, chk.cost, chk.converged, chk.Sig
+            warnings.append(
+                f"batch: the slips after the calibration window contradict the sparse zero-slip prior "
+                f"(the solution with it is {chk.verdict.p95:.1f} sigma from the one without, 95th percentile "
+                "near the fixes): the prior-free solution is given, slip a free random walk after the window")
+        else:
+            Sig = chk.widened
     if rb is not None:
         Sig, Sgg = Sig
     range_bias = None
     if rb is not None:
         range_bias = {b.id: {"value": float(v), "sigma": float(np.sqrt(Sgg[i, i]))}
                       for i, (b, v) in enumerate(zip(log.robot.beacons, rb))}
-    warnings = []
     if not converged:
         warnings.append(f"batch: stopped at its iteration cap ({options.max_iterations} Gauss-Newton "
                         "iterations) before converging; the estimate may not be the optimum")
     notes = [f"batch: {prob.kf.n} keyframes at {options.keyframe_hz:g} Hz, {iters} Gauss-Newton iterations, "
-             f"final cost {cost:.1f}; {start}", prob.init.note]
+             f"final cost {cost:.1f}; {start}{'; ' + checked if checked else ''}", prob.init.note]
     return smoother_estimate(prob, schedule, pose, W, Sig, "batch", wall0, notes, warnings, held=held,
                              range_bias=range_bias, held_out=held_out, cost=float(cost))
+
+
+@dataclass(frozen=True)
+class SlipPriorCheck:
+    """check_slip_prior's outcome: the prior-free problem and its solution
+    (pose (N, 3), W (N, 8), rb, Sig: marginal_blocks' return), its cost,
+    convergence and iterations; ``widened``: the joint solution's keyframe
+    covariance widened to hold the prior-free mean (marginal_blocks' form);
+    ``verdict`` (priorcheck.Verdict; None: the prior-free solve diverged);
+    ``note``: one line for the run's notes."""
+    prob: Problem
+    pose: np.ndarray
+    W: np.ndarray
+    rb: np.ndarray | None
+    Sig: object
+    cost: float
+    converged: bool
+    iterations: int
+    widened: object
+    verdict: Verdict | None
+    note: str
+
+
+def check_slip_prior(prob: Problem, pose: np.ndarray, W: np.ndarray, rb: np.ndarray | None,
+                     options: GraphOptions) -> SlipPriorCheck | None:
+    """Solve again without the sparse slip prior after the window, from the
+    joint solution (pose (N, 3), W (N, 8), rb) of ``prob``, and compare the
+    two (estimators.priorcheck). None: not checked (option off, no window,
+    no prior, or no slip after the window above priorcheck.SLIP_SEEN)."""
+    if not (options.slip_check and prob.slip_robust is not None and prob.window_mask.any()
+            and slip_after_window(prob.zero_slip, W) > SLIP_SEEN):
+        return None
+    free = dataclasses.replace(prob, slip_robust=None)
+    solver = options if isinstance(options, SmootherOptions) else SmootherOptions()
+    pose_f, W_f, it, cost_f, rb_f, conv_f = solve(free, pose, W, solver, None, range_bias=rb, graduate=False)
+    if not (np.all(np.isfinite(pose_f)) and np.all(np.isfinite(W_f))):
+        return SlipPriorCheck(free, pose_f, W_f, rb_f, None, float(cost_f), False, it, None, None,
+                              "the check of the sparse slip prior diverged; the prior's solution is given unchecked")
+    Sig_f = marginal_blocks(free, pose_f, W_f, rb_f)
+    blocks_f = Sig_f[0] if rb is not None else Sig_f
+    d = tangent_difference(pose, W, pose_f, W_f)
+    kf = prob.kf
+    t_abs = np.sort(np.concatenate([kf.t[kf.gps_k[kf.gps_sigma < HELD_SIGMA]], kf.t[kf.rng_k]]))
+    v = verdict(d, blocks_f, informed(kf.t, t_abs))
+    wide = widened(blocks_f, d) if rb is None else (widened(blocks_f, d), Sig_f[1] + np.outer(rb - rb_f, rb - rb_f))
+    return SlipPriorCheck(free, pose_f, W_f, rb_f, Sig_f, float(cost_f), conv_f, it, wide, v,
+                          f"slip prior checked ({v.p95:.1f} sigma at the 95th percentile, threshold {CHECK_K:g})")
 
 
 def smoother_estimate(prob: Problem, schedule: Schedule, pose: np.ndarray, W: np.ndarray, Sig: np.ndarray,

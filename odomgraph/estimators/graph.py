@@ -110,8 +110,12 @@ class Problem:
         escape the priors (a slip-only schedule on the real libRSF log, as
         first imported, took the track scale to 0). A standstill's zero slip
         is no anchor: with the wheels still it says nothing of a scale."""
-        window = self.zero_slip if self.window is None else self.window
-        return self.speed_ref is not None and bool(window.any())
+        return self.speed_ref is not None and bool(self.window_mask.any())
+
+    @property
+    def window_mask(self) -> np.ndarray:
+        """(N-1,) the schedule's calibration window (zero_slip less standstills)."""
+        return self.zero_slip if self.window is None else self.window
 
     def loss_k(self) -> float:
         """The robust threshold in sigmas now in force (robust_k, scaled by gnc_scale)."""
