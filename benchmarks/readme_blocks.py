@@ -326,6 +326,37 @@ def _slip_prior_sentence(results: Path) -> str:
             f"{plain['max_abs_z']:.1f} σ (`benchmarks/results/weak_gps.md`).")
 
 
+def slip_prior(results: Path) -> str:
+    """slip_prior.json: the sparse slip prior's check, checked against unchecked."""
+    d = _load("slip_prior", results)
+    s, cases = d["summary"], d["cases"]
+
+    def pct(row):
+        return f"{100 * s[row]['worst_outside']:.0f} %"
+
+    def over(row):
+        return f"{s[row]['over_5pct_ok']} of {s[row]['n']}"
+
+    dist = [c["rows"]["batch"]["distance"] for c in cases if c["rows"]["batch"]["distance"] is not None]
+    switched = [c["rows"]["batch"]["distance"] for c in cases if c["rows"]["batch"]["prior_free"]]
+    kept = [v for v in dist if v not in switched]
+    return (f"  On {len(cases)} logs of {d['duration_s']:g} s (yard and paper with their slip events, fixes "
+            f"{d['gps'][0][0]:g}–{d['gps'][-1][0]:g} m at {d['gps'][-1][1]:g}–{d['gps'][0][1]:g} Hz, seeds "
+            f"{', '.join(map(str, d['seeds']))}; a {d['push']['speed']:g} m/s push of both wheels for "
+            f"{d['push']['end'] - d['push']['start']:g} s under {d['push']['gps_sigma']:g} m fixes; two logs without "
+            f"slip events), the worst share of rows outside 3σ was: batch unchecked {pct('batch, prior unchecked')} "
+            f"({over('batch, prior unchecked')} logs over 5 % with status ok), checked {pct('batch')} "
+            f"({over('batch')}); isam2 {pct('isam2')} and fixed-lag {pct('fixed-lag')} ({over('isam2')} and "
+            f"{over('fixed-lag')}); the EKF {pct('ekf')}. Median position RMS: batch unchecked "
+            f"{s['batch, prior unchecked']['median_rms_m']:.2f} m, checked {s['batch']['median_rms_m']:.2f} m, no "
+            f"prior after the window {s['batch, no prior after the window']['median_rms_m']:.2f} m, the EKF "
+            f"{s['ekf']['median_rms_m']:.2f} m. batch gave the prior-free solution on {s['batch']['prior_free']} logs "
+            f"(distance {_rng(switched, '{:.1f}') if switched else '-'}) and kept the joint mean on {len(kept)} "
+            f"({_rng(kept, '{:.1f}') if kept else '-'}); isam2 was flagged on {s['isam2']['flagged']}, fixed-lag on "
+            f"{s['fixed-lag']['flagged']}. The second solve costs batch {s['batch_wall_ratio']['median']:.2f}x its "
+            f"wall time (median; worst {s['batch_wall_ratio']['max']:.2f}x).\n\n  " + _source("slip_prior", d))
+
+
 def wheel_speed_units(results: Path) -> str:
     sh = _load("speed_shrinkage", results)
     d = _shrinkage(sh)
@@ -1416,7 +1447,7 @@ BLOCKS = {f.__name__: f for f in (
     # README.md
     smoother_scale, log_io, wheel_speed_units, montecarlo_wall, montecarlo_findings, optiodom_transfer, librsf_limits,
     calibration_transfer,
-    faults_still, range_bias, report_size, weak_gps, weak_online, online_stream, outrun, outrun_missed,
+    faults_still, range_bias, report_size, weak_gps, weak_online, online_stream, outrun, outrun_missed, slip_prior,
     # benchmarks/README.md
     ekf_accuracy_table, ekf_throughput_table, smoother_accuracy_table, smoother_accuracy_findings, track_bias,
     smoother_consistency, speed_shrinkage, smoother_scaling_table, smoother_scaling_memory_peer, real_data_tables,

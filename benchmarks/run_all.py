@@ -22,7 +22,7 @@ import time
 #: fragmented the machine; then the long studies.
 ORDER = ("ekf_throughput", "ekf_vectorised", "smoother_scaling", "online", "log_io", "report_size", "ekf_accuracy",
          "smoother_accuracy", "speed_shrinkage", "track_bias", "velocity_means", "real_data",
-         "calibration_transfer", "weak_gps", "outrun", "faults", "fuzz", "montecarlo_study")
+         "calibration_transfer", "weak_gps", "slip_prior", "outrun", "faults", "fuzz", "montecarlo_study")
 
 
 #: Arguments other than the defaults: the fuzz run the README quotes.

@@ -13,7 +13,6 @@ import numpy as np
 from odomgraph import state as S
 from odomgraph.analysis.metrics import nis_summary, nis_warnings, truth_errors
 from odomgraph.errors import CalibrationRejectedError, OdomgraphError
-from odomgraph.estimators.priorcheck import slips_seen
 from odomgraph.estimators.registry import Method, check_option_names, parse_method
 from odomgraph.estimators.registry import run as _run
 from odomgraph.estimators.schedule import Schedule
@@ -49,9 +48,33 @@ def estimate(log: Log, method: Method = Method.ekf, schedule: Schedule = Schedul
         # (with a clock offset, the run is an estimate() call of its own, checked there)
         est = _with_sideways(est, log, schedule, run, method)
         est = _with_outrun(est, log)
+    est = _with_slip_check(est)
     for e in (est, est.online):
         if e is not None:
             e.t_origin = log.t_origin
+    return est
+
+
+def _with_slip_check(est: Estimate) -> Estimate:
+    """batch's check of its sparse slip prior applied to the answer
+    (Estimate.slip_check, estimators.priorcheck). It comes last: the checks
+    of the fixes read the prior's rows, which do not follow a fault of the
+    fixes as a prior-free path does (persistent GPS errors, no slip: a
+    prior-free path followed them, they looked white, and their sigma stayed
+    narrow, 23 % of rows outside 3 sigma; a sideways multipath bias: half
+    of it taken as slip, and not held out)."""
+    chk = est.slip_check
+    if chk is None:
+        return est
+    for k, v in chk.fields.items():
+        setattr(est, k, v)
+    est.slip_check = None
+    est.notes.append(chk.note)
+    if chk.prior_free:
+        est.warnings.append(
+            f"{est.method}: the slips after the calibration window contradict the sparse zero-slip prior (the "
+            f"solution with it is {chk.distance:.1f} sigma from the one without, 95th percentile near the fixes): "
+            "the prior-free solution is given, slip a free random walk after the window")
     return est
 
 
@@ -302,18 +325,11 @@ def _estimate_checked(log: Log, method: Method, schedule: Schedule, progress, op
         motion = motion_scales(log)
         log = widened_motion(log, motion)
     def run(schedule: Schedule, options: dict) -> tuple[Estimate, dict]:
-        # batch's check of its sparse slip prior (estimators.priorcheck) waits
-        # for the noise fit, which measures the fixes about the prior's path:
-        # a path freed of the prior follows wandering fixes (persistent GPS
-        # errors, no slip: the check switched to it, the fixes then looked
-        # white, their sigma stayed narrow and 23 % of rows fell outside 3 sigma).
-        # (isam2 and fixed-lag only flag and widen: their means do not change)
-        deferred = fit_noise and method is Method.batch and options.get("slip_check", True)
-        est = _estimate_once(log, method, schedule, progress, {**options, "slip_check": False} if deferred else options)
+        est = _estimate_once(log, method, schedule, progress, options)
         _check_physical(est)
         est, options, offsets_note = _with_range_offsets(est, log, method, schedule, options)
         if fit_noise:
-            est = _with_noise_scales(est, log, method, schedule, options, checked=not deferred)
+            est = _with_noise_scales(est, log, method, schedule, options)
         _check_physical(est)
         est.warnings += offsets_note
         return est, options
@@ -661,13 +677,10 @@ def _estimate_once(log: Log, method: Method, schedule: Schedule, progress, optio
         raise EstimatorDivergedError(f"{method.value}: the solver failed ({first})") from exc
 
 
-def _with_noise_scales(est: Estimate, log: Log, method: Method, schedule: Schedule, options: dict,
-                       checked: bool = True) -> Estimate:
+def _with_noise_scales(est: Estimate, log: Log, method: Method, schedule: Schedule, options: dict) -> Estimate:
     """Widen GPS and range sigmas that the data say are too small, and run
     again (at most twice): every sigma of the estimate inherits them
-    (analysis.noise). The scales found and applied go into the result.
-    ``checked=False``: ``est`` came without batch's slip-prior check (run);
-    if no pass runs again and it shows slip after the window, run again with it."""
+    (analysis.noise). The scales found and applied go into the result."""
     from odomgraph.analysis.noise import (NARROW_BELOW, NARROW_MIN_COUNT, WIDEN_ABOVE, WIDEN_FLAG_ABOVE,
                                           correlation_factors, floored,
                                           gps_sigma_floor, measured_count, measured_from, noise_scales, widened)
@@ -703,9 +716,6 @@ def _with_noise_scales(est: Estimate, log: Log, method: Method, schedule: Schedu
         cur = widened(cur, act)
         est = _estimate_once(cur, method, schedule, None, options)
         scales = noise_scales(est, cur)
-        checked = True
-    if not checked and slips_seen(est.t, est.mean[:, S.SLIP], est.t_switch):
-        est = _estimate_once(cur, method, schedule, None, options)
     source = {k: measured_from(first, k) for k in measured}
     est.noise_scales = {k: {"measured": v, "correlation": corr.get(k, (0.0, 1.0))[0],
                             "applied": applied.get(k, 1.0), "from": source[k]} for k, v in measured.items()}

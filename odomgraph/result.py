@@ -104,6 +104,12 @@ class Estimate:
     (robust losses and priors included); differences between runs on one
     log with one noise model are log-likelihood ratios (the gyro scale's
     profile, analysis.gyroscale)."""
+    slip_check: "SlipPriorRows | None" = None
+    """batch: the check of its sparse slip prior (estimators.priorcheck),
+    not yet applied to these rows: the pipeline applies it to the answer it
+    gives, once the checks of the fixes (noise, sideways, outrun) have run
+    on the prior's rows (pipeline._with_slip_check)."""
+
 
     def __post_init__(self):
         n = len(self.t)
@@ -204,3 +210,17 @@ def status_of(est: Estimate) -> tuple[str, list[str]]:
     if said:
         return "recovered", said
     return "ok", []
+
+
+@dataclass
+class SlipPriorRows:
+    """What batch's slip-prior check would make of an Estimate's rows:
+    ``distance`` [sigma] between the prior's and the prior-free solutions
+    (95th percentile near the fixes); ``prior_free``: the prior-free
+    solution replaces the prior's; ``fields``: the Estimate fields it sets
+    (mean, sigma, pose_cov, calibration_sigma, calibration_cov, range_bias),
+    row for row; ``note``: one line for the notes."""
+    distance: float
+    prior_free: bool
+    fields: dict
+    note: str

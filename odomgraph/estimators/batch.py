@@ -37,7 +37,7 @@ from odomgraph.estimators.priorcheck import (CHECK_K, SLIP_SEEN, Verdict, inform
 from odomgraph.observability import decondition
 from odomgraph.estimators.slipcheck import in_stretches, in_window
 from odomgraph.estimators.standstill import still_intervals
-from odomgraph.result import Estimate
+from odomgraph.result import Estimate, SlipPriorRows
 from odomgraph.estimators.schedule import Schedule
 from odomgraph.io.log import Log
 
@@ -60,11 +60,12 @@ class GraphOptions:
     slip is a free random walk after the window as in the EKF."""
     slip_check: bool = True
     """Where slip after the calibration window exceeds priorcheck.SLIP_SEEN,
-    solve again without the sparse slip prior there (check_slip_prior). batch
-    gives that solution where the two differ by more than priorcheck.CHECK_K
-    sigma; isam2 and fixed-lag, whose rows were given as they came, are
-    flagged there. Either way the rows' covariance is widened to hold both
-    means. False: the prior trusted unchecked."""
+    solve again without the sparse slip prior there (check_slip_prior).
+    batch gives that solution where the two differ by more than
+    priorcheck.CHECK_K sigma, and elsewhere widens its covariance to hold
+    both means (applied by pipeline.estimate, after the checks of the fixes:
+    Estimate.slip_check); isam2 and fixed-lag, whose rows were given as they
+    came, are flagged there. False: the prior trusted unchecked."""
     pin: tuple[tuple[str, str], ...] = ()
     """(scale combination, reason) pairs to hold at nominal with their prior
     sigma, as if the log could not determine them (observability)."""
@@ -696,34 +697,43 @@ def run_batch(log: Log, schedule: Schedule = Schedule(), options: SmootherOption
     if not (np.all(np.isfinite(pose)) and np.all(np.isfinite(W))):
         raise EstimatorDivergedError("batch smoother diverged: non-finite estimate")
     Sig = marginal_blocks(prob, pose, W, rb)
-    warnings, checked = [], ""
+    warnings = []
     chk = check_slip_prior(prob, pose, W, rb, options)
     if chk is not None:
         iters += chk.iterations
-        checked = chk.note
-        if chk.verdict is None:
-            warnings.append(f"batch: {chk.note}")
-        elif chk.verdict.prior_free:
-            prob, pose, W, rb, cost, converged, Sig = chk.prob, chk.pose, chk.W, chk.rb, chk.cost, chk.converged, chk.Sig
-            warnings.append(
-                f"batch: the slips after the calibration window contradict the sparse zero-slip prior "
-                f"(the solution with it is {chk.verdict.p95:.1f} sigma from the one without, 95th percentile "
-                "near the fixes): the prior-free solution is given, slip a free random walk after the window")
-        else:
-            Sig = chk.widened
     if rb is not None:
         Sig, Sgg = Sig
-    range_bias = None
-    if rb is not None:
-        range_bias = {b.id: {"value": float(v), "sigma": float(np.sqrt(Sgg[i, i]))}
-                      for i, (b, v) in enumerate(zip(log.robot.beacons, rb))}
     if not converged:
         warnings.append(f"batch: stopped at its iteration cap ({options.max_iterations} Gauss-Newton "
                         "iterations) before converging; the estimate may not be the optimum")
     notes = [f"batch: {prob.kf.n} keyframes at {options.keyframe_hz:g} Hz, {iters} Gauss-Newton iterations, "
-             f"final cost {cost:.1f}; {start}{'; ' + checked if checked else ''}", prob.init.note]
-    return smoother_estimate(prob, schedule, pose, W, Sig, "batch", wall0, notes, warnings, held=held,
-                             range_bias=range_bias, held_out=held_out, cost=float(cost))
+             f"final cost {cost:.1f}; {start}", prob.init.note]
+    est = smoother_estimate(prob, schedule, pose, W, Sig, "batch", wall0, notes, warnings, held=held,
+                            range_bias=_range_bias(log, rb, Sgg if rb is not None else None), held_out=held_out,
+                            cost=float(cost))
+    if chk is not None and chk.verdict is None:
+        est.warnings.append(f"batch: {chk.note}")
+    elif chk is not None:
+        # The rows the check gives, built as these were; the pipeline applies them (Estimate.slip_check).
+        if chk.verdict.prior_free:
+            a_prob, a_pose, a_W, a_rb, a_Sig = chk.prob, chk.pose, chk.W, chk.rb, chk.Sig
+        else:
+            a_prob, a_pose, a_W, a_rb, a_Sig = prob, pose, W, rb, chk.widened
+        a_Sig, a_Sgg = a_Sig if a_rb is not None else (a_Sig, None)
+        alt = smoother_estimate(a_prob, schedule, a_pose, a_W, a_Sig, "batch", wall0, [], [], held=held,
+                                range_bias=_range_bias(log, a_rb, a_Sgg), held_out=held_out)
+        if alt.t.shape == est.t.shape:
+            est.slip_check = SlipPriorRows(chk.verdict.p95, chk.verdict.prior_free, {
+                k: getattr(alt, k) for k in ("mean", "sigma", "pose_cov", "calibration_sigma", "calibration_cov",
+                                             "range_bias")}, f"batch: {chk.note}")
+    return est
+
+
+def _range_bias(log: Log, rb: np.ndarray | None, Sgg: np.ndarray | None) -> dict | None:
+    """{beacon id: {value, sigma}} of the range biases rb (B,) with covariance Sgg (B, B); None without."""
+    if rb is None:
+        return None
+    return {b.id: {"value": float(v), "sigma": float(np.sqrt(Sgg[i, i]))} for i, (b, v) in enumerate(zip(log.robot.beacons, rb))}
 
 
 @dataclass(frozen=True)

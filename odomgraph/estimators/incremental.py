@@ -610,16 +610,16 @@ class _Runner:
         if gi and self.prob.kf.gps_t is not None:
             extra["held_out"] = {"gps": self.prob.kf.gps_t[gi]}
         # The sparse slip prior, checked as batch checks it (batch.check_slip_prior).
-        # The rows were given as they came, so a prior the data contradict is
-        # flagged, not replaced (a yard log, 0.5 m fixes at 2 Hz and one-wheel
-        # slips: 48 % of isam2's rows outside 3 sigma, status ok).
+        # The rows were given as they came (fixed-lag's, isam2's online.csv), so a
+        # prior the data contradict is flagged, and nothing is replaced or widened
+        # (a yard log, 0.5 m fixes at 2 Hz and one-wheel slips: 48 % of isam2's
+        # rows outside 3 sigma, status ok).
         chk = check_slip_prior(self.prob, self.pose, self.W, None, self.options)
         if chk is not None:
             notes = notes + [f"{self.method}: {chk.note}"]
             if chk.verdict is None:
                 extra["warnings"] = list(extra.get("warnings", ())) + [f"{self.method}: {chk.note}"]
             else:
-                Sig = chk.widened
                 if chk.verdict.prior_free:
                     line = (f"{self.method}: the slips after the calibration window contradict the sparse "
                             f"zero-slip prior its rows rest on (the solution without it is {chk.verdict.p95:.1f} "
