@@ -470,6 +470,11 @@ def estimate(
     slip_cauchy: Annotated[Optional[float], typer.Option(
         help="Smoothers: Cauchy scale [m/s] of the sparse zero-slip prior outside the calibration window "
              "(default 0.005).")] = None,
+    slip_check: Annotated[Optional[bool], typer.Option(
+        "--slip-check/--no-slip-check",
+        help="Smoothers: check the sparse slip prior against the prior-free solution where slip is seen after "
+             "the window (default on; batch then gives the prior-free rows or widens its sigma, isam2 and "
+             "fixed-lag are flagged).")] = None,
     robust: Annotated[Optional[RobustName], typer.Option(
         help="Smoothers: robust loss for GPS fixes and ranges (real data has outliers); default cauchy, "
              "with graduated non-convexity in batch; none: Gaussian.")]
@@ -503,7 +508,7 @@ def estimate(
     from odomgraph.io.log import read_log
     from odomgraph.pipeline import Method, estimate_to_dir
     schedule = _parse_schedule(calibrate_until, hold)
-    options = dict(gate=gate, keyframe_hz=keyframe_hz, lag=lag, slip_cauchy=slip_cauchy,
+    options = dict(gate=gate, keyframe_hz=keyframe_hz, lag=lag, slip_cauchy=slip_cauchy, slip_check=slip_check,
                    robust=robust.value if robust else None, robust_k=robust_k, range_bias=range_bias,
                    time_offset=time_offset, rate=rate, at=at.value if at else None)
     if _is_fleet(log_dir, workers, scheduler):
