@@ -13,6 +13,7 @@ import numpy as np
 from odomgraph import state as S
 from odomgraph.analysis.metrics import nis_summary, nis_warnings, truth_errors
 from odomgraph.errors import CalibrationRejectedError, OdomgraphError
+from odomgraph.estimators.priorcheck import applied
 from odomgraph.estimators.registry import Method, check_option_names, parse_method
 from odomgraph.estimators.registry import run as _run
 from odomgraph.estimators.schedule import Schedule
@@ -48,33 +49,10 @@ def estimate(log: Log, method: Method = Method.ekf, schedule: Schedule = Schedul
         # (with a clock offset, the run is an estimate() call of its own, checked there)
         est = _with_sideways(est, log, schedule, run, method)
         est = _with_outrun(est, log)
-    est = _with_slip_check(est)
+    est = applied(est)   # batch's check of its slip prior, last (priorcheck.applied)
     for e in (est, est.online):
         if e is not None:
             e.t_origin = log.t_origin
-    return est
-
-
-def _with_slip_check(est: Estimate) -> Estimate:
-    """batch's check of its sparse slip prior applied to the answer
-    (Estimate.slip_check, estimators.priorcheck). It comes last: the checks
-    of the fixes read the prior's rows, which do not follow a fault of the
-    fixes as a prior-free path does (persistent GPS errors, no slip: a
-    prior-free path followed them, they looked white, and their sigma stayed
-    narrow, 23 % of rows outside 3 sigma; a sideways multipath bias: half
-    of it taken as slip, and not held out)."""
-    chk = est.slip_check
-    if chk is None:
-        return est
-    for k, v in chk.fields.items():
-        setattr(est, k, v)
-    est.slip_check = None
-    est.notes.append(chk.note)
-    if chk.prior_free:
-        est.warnings.append(
-            f"{est.method}: the slips after the calibration window contradict the sparse zero-slip prior (the "
-            f"solution with it is {chk.distance:.1f} sigma from the one without, 95th percentile near the fixes): "
-            "the prior-free solution is given, slip a free random walk after the window")
     return est
 
 
@@ -823,7 +801,10 @@ def _with_time_offset(log: Log, method: Method, schedule: Schedule, progress, op
         if o is None and est is None and first is None:
             # Wheels a few percent off nominal bend the path enough that the
             # offset cannot be told from them: measure with the estimated ones.
-            first = estimate(log, method, schedule, progress, **options)
+            # (the smoothers' slip prior unchecked: a prior-free path takes a late clock for slip, and its
+            # scale factors then hide the offset; a paper log 0.3 s late gave no offset at all)
+            first = estimate(log, method, schedule, progress,
+                             **(options if method is Method.ekf else {**options, "slip_check": False}))
             scales = tuple(float(v) for v in first.mean[-1, S.SCALE])
             continue
         if o is None:

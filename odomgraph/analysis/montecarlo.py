@@ -118,6 +118,7 @@ def run_point(p: PointSpec) -> PointResult:
     """Simulate, estimate and score the runs of one grid point."""
     import time
     from odomgraph.estimators.batch import SmootherOptions, run_batch
+    from odomgraph.estimators.priorcheck import applied
     from odomgraph.estimators.ekf_many import run_ekf_many
     from odomgraph.estimators.schedule import Schedule
     from odomgraph.sim.sensor_configs import study_scenario
@@ -148,7 +149,7 @@ def run_point(p: PointSpec) -> PointResult:
         try:
             if isinstance(est, Exception):
                 raise EstimatorDivergedError(f"no EKF estimate to start from ({est})")
-            smoothed = run_batch(log, schedule, SmootherOptions(), initial=est)
+            smoothed = applied(run_batch(log, schedule, SmootherOptions(), initial=est))   # (its slip-prior check)
             scores["batch"].append(_score(smoothed, log))
         except (EstimatorDivergedError, FloatingPointError, np.linalg.LinAlgError, RuntimeError) as exc:
             scores["batch"].append(None)

@@ -43,6 +43,7 @@ import numpy as np
 
 from odomgraph import state as S
 from odomgraph.factors._math import wrap_angle
+from odomgraph.result import Estimate
 
 #: Slip [m/s] after the window above which the prior is checked: a few times
 #: what the prior leaves on clean logs (2-4 mm/s RMS, peaks near 0.02), far
@@ -137,3 +138,28 @@ def verdict(d: np.ndarray, Sig_free: np.ndarray, where: np.ndarray, k: float = C
         return Verdict(0.0, False)
     p95 = float(np.percentile(pose_distance(d[where], Sig_free[where]), 95))
     return Verdict(p95, p95 > k)
+
+
+def applied(est: Estimate) -> Estimate:
+    """``est`` with batch's check of its sparse slip prior applied
+    (Estimate.slip_check: the prior-free rows, or the widened covariance;
+    said in its notes, and in a warning where the prior-free rows are
+    given). pipeline.estimate applies it last: the checks of the fixes read
+    the prior's rows, which do not follow a fault of the fixes as a
+    prior-free path does (persistent GPS errors, no slip: a prior-free path
+    followed them, they looked white, their sigma stayed narrow, and 23 % of
+    rows fell outside 3 sigma; a sideways multipath bias: half of it taken
+    as slip, and not held out)."""
+    chk = est.slip_check
+    if chk is None:
+        return est
+    for k, v in chk.fields.items():
+        setattr(est, k, v)
+    est.slip_check = None
+    est.notes.append(chk.note)
+    if chk.prior_free:
+        est.warnings.append(
+            f"{est.method}: the slips after the calibration window contradict the sparse zero-slip prior (the "
+            f"solution with it is {chk.distance:.1f} sigma from the one without, 95th percentile near the fixes): "
+            "the prior-free solution is given, slip a free random walk after the window")
+    return est
