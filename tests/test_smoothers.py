@@ -298,8 +298,8 @@ def test_wheel_speed_units_shrink_the_poor_gps_scale_bias():
         log = simulate(sc, seed)
         sch = Schedule(sc.calibrate_until)
         ekf = run_ekf(log, sch)
-        # (the slip prior unchecked: its check would hand the plain walks' run the prior-free solution,
-        # whose ticks/m this mechanism does not concern)
+        # (the slip prior unchecked: run_batch leaves its check for priorcheck.applied anyway, and the
+        # second solve would only cost time here)
         units = run_batch(log, sch, SmootherOptions(slip_check=False), initial=ekf).mean[-1, S.SCALE] / sc.scales - 1
         plain = run_batch(log, sch, SmootherOptions(wheel_speed_units=False, slip_check=False),
                           initial=ekf).mean[-1, S.SCALE] / sc.scales - 1

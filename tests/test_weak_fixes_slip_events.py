@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 
 from odomgraph import state as S
-from odomgraph.estimators.batch import SmootherOptions, run_batch
+from odomgraph.estimators.batch import run_batch
 from odomgraph.estimators.schedule import Schedule
 from odomgraph.pipeline import estimate
 from odomgraph.result import status_of
@@ -68,15 +68,21 @@ def test_batch_holds_its_sigma_through_the_slip_events(make, gps_sigma, gps_hz, 
     assert any(PRIOR_FREE in w for w in est.warnings) == free, est.warnings
     assert status_of(est)[0] == "ok"           # a model replaced is said, and the answer is right: not degraded
     assert any("slip prior checked" in n for n in est.notes), est.notes
-    assert est.slip_check is None              # (applied: pipeline._with_slip_check)
 
 
 def test_the_check_is_what_mends_batch():
-    """The same yard log with the prior unchecked: batch is overconfident
-    (so the check, not some other change, holds the sigma above)."""
+    """The same yard log through the same pipeline with the prior
+    unchecked: batch is overconfident (so the check, not some other change,
+    holds the sigma above); and run_batch alone leaves the check's outcome
+    for priorcheck.applied, which gives the pipeline's rows."""
+    from odomgraph.estimators.priorcheck import applied
     log = _log(yard, 0.5, 2.0, 12)
-    est = run_batch(log, Schedule(20.0), SmootherOptions(slip_check=False))
+    est = estimate(log, "batch", Schedule(20.0), slip_check=False)
     assert _outside(est, log) > 0.3            # measured 60 %
+    raw = run_batch(log, Schedule(20.0))
+    assert raw.slip_check is not None and raw.slip_check.prior_free
+    assert _outside(raw, log) > 0.3            # unchecked rows until applied...
+    assert _outside(applied(raw), log) < 0.03  # ...and within sigma after
 
 
 @pytest.mark.parametrize("method", ["isam2", "fixed-lag"])

@@ -651,7 +651,12 @@ def run_batch(log: Log, schedule: Schedule = Schedule(), options: SmootherOption
               progress=None, initial: Estimate | None = None) -> Estimate:
     """Smooth the whole log, from its own robust start (robust_initial_guess),
     or from ``initial``, an estimate of the same log (the Monte-Carlo study
-    passes the EKF's, which it has anyway)."""
+    passes the EKF's, which it has anyway).
+
+    The rows are the sparse slip prior's, unchecked: where the check ran
+    (GraphOptions.slip_check), its outcome waits in ``Estimate.slip_check``
+    until priorcheck.applied gives it (pipeline.estimate does, last; so does
+    the Monte-Carlo study). A caller of run_batch alone applies it itself."""
     wall0 = time.perf_counter()
     prob = build_problem(log, schedule, options)
     if initial is None:
