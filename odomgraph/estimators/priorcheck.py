@@ -53,10 +53,11 @@ SLIP_SEEN = 0.05
 #: pose distance (3 dof) between the two solutions, in the prior-free sigma.
 #: Were the prior right, the two would differ by a draw of covariance
 #: Sigma_free - Sigma_joint, which is at most Sigma_free: a chi of 3 dof,
-#: whose 95th percentile is 2.8. Measured (benchmarks/slip_prior): 1.3-2.6
-#: on logs whose joint mean was right or nearly (strong fixes; the paper robot
-#: with 1-3 m fixes), 4.6-9.7 where it was far off (the yard with 0.5-1 m
-#: fixes and its one-wheel slips; a slip through the window).
+#: whose 95th percentile is 2.8 (a heuristic: the keyframes are correlated).
+#: Measured (benchmarks/results/slip_prior.md): 1.4-2.7 on logs whose joint
+#: mean was right or nearly (strong fixes; the paper robot with 1-3 m fixes,
+#: once widened), 3.1-6.8 where it was far off (the yard with 0.5-1 m fixes
+#: and its one-wheel slips) or nearly so (paper, 1 m at 1 Hz).
 CHECK_K = 3.0
 #: The check reads only keyframes within this much [s] of a fix or range:
 #: in a gap in the fixes nothing tests the prior, and the two solutions part
